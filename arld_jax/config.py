@@ -1,0 +1,388 @@
+"""One frozen configuration, the sweepable hyperparameters, presets and validation.
+
+Two kinds of settings (STYLE.md habit 2):
+
+* **Static** fields set array shapes or program structure (number of envs, replay capacity, batch size,
+  network width, reference-window size N_r, ...). They are closed over by `make_train` and changing one
+  means a new compiled program.
+* **Sweepable** fields (`SWEEPABLE`) are values: query strategy, Bernoulli probability b, proportion
+  threshold t_query, demonstration length C, budget, uncertainty measure, learning rates, seed, ...
+  They travel into the compiled program as a small pytree of arrays (`HParams`), so one program can
+  `vmap` over any grid of them together with seeds.
+
+Every check runs in Python, before anything compiles, and names the field, the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import flax.struct
+import jax.numpy as jnp
+
+STRATEGIES: tuple[str, ...] = ("none", "greedy", "bernoulli", "active")
+"""Query strategies (paper section 4): SAC, GQSAC, BQSAC, AQSAC. The index is the id used on device."""
+
+UNCERTAINTIES: tuple[str, ...] = ("intrinsic", "extrinsic")
+"""Uncertainty measures: intrinsic = SAC's sigma_theta(s) (paper 3.2); extrinsic = Noisy SAC's analytic
+variance of the perturbed mean (paper 3.1). Choosing "extrinsic" also makes the agent a Noisy SAC."""
+
+ENVS: tuple[str, ...] = ("halfcheetah", "toy")
+BACKENDS: tuple[str, ...] = ("mjx", "generalized", "positional", "spring")
+REDUCTIONS: tuple[str, ...] = ("mean", "max", "sum")
+WINDOW_RECORDS: tuple[str, ...] = ("all", "agent")
+MATMUL_DTYPES: tuple[str, ...] = ("float32", "bfloat16")
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything that defines a run. Defaults follow the paper (appendix A.1) where it says something."""
+
+    # ---- environment (static) ----
+    env_name: str = "halfcheetah"
+    """'halfcheetah' (Brax, MuJoCo physics) or 'toy' (a cheap pure-JAX stand-in used by the tests)."""
+    backend: str = "mjx"
+    """Brax physics backend for halfcheetah: 'mjx' (MuJoCo-MJX) or one of Brax's own pipelines."""
+    num_envs: int = 1
+    """Environments stepped in parallel per run (vmapped). The paper uses one."""
+    episode_length: int = 1000
+    """Steps per episode (time limit). HalfCheetah never terminates, so every episode has this length."""
+    total_env_steps: int = 100_000
+    """Environment steps per run, summed over the parallel envs (the paper's 'timesteps': 400k)."""
+    learning_starts: int = 5_000
+    """Env steps of uniform-random agent actions before gradient updates start (SAC warm-up)."""
+    eval_every: int = 5_000
+    """Env steps between evaluations of the deterministic policy tanh(mu) (paper: 5,000)."""
+    num_eval_episodes: int = 5
+    """Episodes per evaluation, run in parallel (each from a fresh random initial state)."""
+
+    # ---- SAC (static: shapes and structure) ----
+    hidden_sizes: tuple[int, ...] = (256, 256)
+    """Hidden layer widths of actor and critics (paper A.1: two layers of 256, ReLU)."""
+    batch_size: int = 256
+    """Minibatch size of one gradient update."""
+    replay_capacity: int = 1_000_000
+    """Prioritized replay capacity in transitions (ring buffer)."""
+    updates_per_env_step: float = 1.0
+    """Gradient updates per env step (paper: 1). With num_envs envs, num_envs * this updates run per
+    iteration; the product must be a whole number."""
+    autotune_alpha: bool = False
+    """Tune the temperature alpha towards a target entropy (Haarnoja et al. 2018b). The paper fixes 0.2."""
+    log_std_min: float = -20.0
+    """Lower clip of the actor's log-std head."""
+    log_std_max: float = 2.0
+    """Upper clip of the actor's log-std head."""
+    noisy_sigma_init: float = 0.017
+    """Initial sigma_w, sigma_b of the Noisy SAC mean head (Fortunato et al. 2017, independent noise)."""
+    matmul_dtype: str = "float32"
+    """Dtype of matmul inputs in the MLPs ('bfloat16' uses AMX/tensor cores; accumulation stays f32)."""
+
+    # ---- SAC (sweepable values) ----
+    actor_lr: float = 3e-4
+    """Adam learning rate of the actor (Haarnoja et al. 2018)."""
+    critic_lr: float = 3e-4
+    """Adam learning rate of the twin critics."""
+    alpha_lr: float = 3e-4
+    """Adam learning rate of log(alpha) when autotune_alpha is on."""
+    gamma: float = 0.99
+    """Discount factor."""
+    tau: float = 0.005
+    """Polyak averaging weight of the target critics."""
+    reward_scale: float = 1.0
+    """Multiplier on rewards in the critic target (paper A.1 tunes it per environment)."""
+    init_alpha: float = 0.2
+    """Entropy temperature (fixed, paper A.1) or its initial value when autotuned."""
+
+    # ---- prioritized replay (paper A.1, Schaul et al. 2015, Vecerik et al. 2017) ----
+    per_alpha: float = 0.6
+    """Priority exponent: P(i) = p_i^alpha / sum_k p_k^alpha (static)."""
+    per_beta0: float = 0.4
+    """Initial importance-sampling exponent, annealed linearly to 1 over the run (static)."""
+    per_eps: float = 1e-6
+    """epsilon in p = delta^2 + epsilon + epsilon_d (static)."""
+    eps_demo: float = 1.0
+    """epsilon_d: priority bonus of demonstration transitions (sweepable)."""
+
+    # ---- ARLD (sweepable values) ----
+    strategy: str = "none"
+    """Query strategy: 'none' (SAC), 'greedy' (GQSAC), 'bernoulli' (BQSAC), 'active' (AQSAC)."""
+    uncertainty: str = "intrinsic"
+    """'intrinsic' (SAC, u = sigma_theta(s)) or 'extrinsic' (Noisy SAC, u = Var[perturbed mean])."""
+    query_prob: float = 0.1
+    """b: query probability of the Bernoulli strategy (paper best: 0.1 for SAC, 0.4 for Noisy SAC)."""
+    t_query: float = 0.1
+    """Proportion threshold of the active strategy: query when u is in the top t_query fraction of the
+    reference window (paper best: 0.1)."""
+    demo_steps: int = 1
+    """C: after a query the expert acts for C consecutive steps, capped at the episode end."""
+    budget: int = 10_000
+    """Demonstration budget in demonstrated env steps per run (paper: 10,000)."""
+    seed: int = 0
+    """Random seed of the run."""
+
+    # ---- ARLD (static) ----
+    window_size: int = 5_000
+    """N_r: reference window of recent uncertainties for the active strategy (paper: 5,000)."""
+    window_records: str = "all"
+    """Which steps enter the reference window: 'all' visited states (default) or only 'agent'-controlled
+    ones. See query.py for why 'all' is the default reading."""
+    uncertainty_reduce: str = "mean"
+    """How a per-action-dimension uncertainty becomes one number: 'mean' (default), 'max' or 'sum'."""
+    query_during_warmup: bool = True
+    """Allow queries during the random warm-up (the budget is paced from step 0, as in the paper)."""
+    expert_path: str | None = None
+    """Directory of the expert checkpoint (needed unless every strategy is 'none')."""
+    expert_stochastic: bool = False
+    """Expert samples from its policy instead of acting with tanh(mu)."""
+
+    # ---- recording (static) ----
+    traces_per_eval: int = 10
+    """Down-sampled points per evaluation period of the uncertainty and budget traces (Figs. 3, 9)."""
+    state_sample_size: int = 512
+    """Size of the uniform on-device samples of visited and of queried states (Fig. 8)."""
+
+    # ---- bookkeeping ----
+    notes: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
+    """Free-form labels carried into results (not used by the trainer)."""
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+    # ---- derived values ----
+    @property
+    def num_iterations(self) -> int:
+        """Loop iterations (each steps every env once)."""
+        return self.total_env_steps // self.num_envs
+
+    @property
+    def iters_per_eval(self) -> int:
+        return self.eval_every // self.num_envs
+
+    @property
+    def num_evals(self) -> int:
+        return self.total_env_steps // self.eval_every
+
+    @property
+    def warmup_iters(self) -> int:
+        return math.ceil(self.learning_starts / self.num_envs)
+
+    @property
+    def updates_per_iter(self) -> int:
+        return round(self.updates_per_env_step * self.num_envs)
+
+    def replace(self, **changes: Any) -> Config:
+        """A copy with some fields changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+
+SWEEPABLE: tuple[str, ...] = (
+    "strategy",
+    "uncertainty",
+    "query_prob",
+    "t_query",
+    "demo_steps",
+    "budget",
+    "eps_demo",
+    "actor_lr",
+    "critic_lr",
+    "alpha_lr",
+    "gamma",
+    "tau",
+    "reward_scale",
+    "init_alpha",
+    "seed",
+)
+"""Config fields that one compiled program can vmap over (values, not shapes)."""
+
+
+@flax.struct.dataclass
+class HParams:
+    """The sweepable values of one run as device arrays (a leading axis when sweeping)."""
+
+    strategy: jnp.ndarray  # int32, index into STRATEGIES
+    noisy: jnp.ndarray  # float32, 1.0 = Noisy SAC agent with extrinsic uncertainty
+    query_prob: jnp.ndarray
+    t_query: jnp.ndarray
+    demo_steps: jnp.ndarray  # int32
+    budget: jnp.ndarray  # int32
+    eps_demo: jnp.ndarray
+    actor_lr: jnp.ndarray
+    critic_lr: jnp.ndarray
+    alpha_lr: jnp.ndarray
+    gamma: jnp.ndarray
+    tau: jnp.ndarray
+    reward_scale: jnp.ndarray
+    init_alpha: jnp.ndarray
+
+
+def hparams_from_config(cfg: Config) -> HParams:
+    """The sweepable values of `cfg` as scalar arrays (the seed travels separately, as a PRNG key)."""
+    f32 = jnp.float32
+    return HParams(
+        strategy=jnp.asarray(STRATEGIES.index(cfg.strategy), jnp.int32),
+        noisy=jnp.asarray(float(cfg.uncertainty == "extrinsic"), f32),
+        query_prob=jnp.asarray(cfg.query_prob, f32),
+        t_query=jnp.asarray(cfg.t_query, f32),
+        demo_steps=jnp.asarray(cfg.demo_steps, jnp.int32),
+        budget=jnp.asarray(cfg.budget, jnp.int32),
+        eps_demo=jnp.asarray(cfg.eps_demo, f32),
+        actor_lr=jnp.asarray(cfg.actor_lr, f32),
+        critic_lr=jnp.asarray(cfg.critic_lr, f32),
+        alpha_lr=jnp.asarray(cfg.alpha_lr, f32),
+        gamma=jnp.asarray(cfg.gamma, f32),
+        tau=jnp.asarray(cfg.tau, f32),
+        reward_scale=jnp.asarray(cfg.reward_scale, f32),
+        init_alpha=jnp.asarray(cfg.init_alpha, f32),
+    )
+
+
+# ---------------------------------------------------------------- validation
+
+
+def _fail(name: str, value: Any, allowed: str) -> None:
+    raise ValueError(f"Config.{name} = {value!r} is invalid: allowed {allowed}.")
+
+
+def _choice(cfg: Config, name: str, options: tuple[str, ...]) -> None:
+    value = getattr(cfg, name)
+    if value not in options:
+        _fail(name, value, "one of " + ", ".join(repr(o) for o in options))
+
+
+def validate(cfg: Config) -> None:
+    """Raise ValueError naming the first invalid field of `cfg` (called on construction)."""
+    for name in (
+        "num_envs",
+        "episode_length",
+        "total_env_steps",
+        "eval_every",
+        "num_eval_episodes",
+        "batch_size",
+        "replay_capacity",
+        "window_size",
+        "traces_per_eval",
+        "state_sample_size",
+    ):
+        value = getattr(cfg, name)
+        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+            _fail(name, value, "an integer >= 1")
+    _choice(cfg, "env_name", ENVS)
+    _choice(cfg, "backend", BACKENDS)
+    _choice(cfg, "strategy", STRATEGIES)
+    _choice(cfg, "uncertainty", UNCERTAINTIES)
+    _choice(cfg, "uncertainty_reduce", REDUCTIONS)
+    _choice(cfg, "window_records", WINDOW_RECORDS)
+    _choice(cfg, "matmul_dtype", MATMUL_DTYPES)
+    if not cfg.hidden_sizes or any(
+        not isinstance(h, int) or isinstance(h, bool) or h < 1 for h in cfg.hidden_sizes
+    ):
+        _fail("hidden_sizes", cfg.hidden_sizes, "a non-empty tuple of integers >= 1")
+    if cfg.batch_size > cfg.replay_capacity:
+        _fail("batch_size", cfg.batch_size, f"<= replay_capacity ({cfg.replay_capacity})")
+    if cfg.num_envs > cfg.replay_capacity:
+        _fail("num_envs", cfg.num_envs, f"<= replay_capacity ({cfg.replay_capacity})")
+    if cfg.eval_every % cfg.num_envs:
+        _fail("eval_every", cfg.eval_every, f"a multiple of num_envs ({cfg.num_envs})")
+    if cfg.total_env_steps % cfg.eval_every:
+        _fail(
+            "total_env_steps", cfg.total_env_steps, f"a multiple of eval_every ({cfg.eval_every})"
+        )
+    if cfg.iters_per_eval % cfg.traces_per_eval:
+        _fail(
+            "traces_per_eval",
+            cfg.traces_per_eval,
+            f"a divisor of eval_every / num_envs ({cfg.iters_per_eval})",
+        )
+    if not isinstance(cfg.learning_starts, int) or cfg.learning_starts < 0:
+        _fail("learning_starts", cfg.learning_starts, "an integer >= 0")
+    if cfg.learning_starts >= cfg.total_env_steps:
+        _fail("learning_starts", cfg.learning_starts, f"< total_env_steps ({cfg.total_env_steps})")
+    upi = cfg.updates_per_env_step * cfg.num_envs
+    if cfg.updates_per_env_step <= 0 or abs(upi - round(upi)) > 1e-9:
+        _fail(
+            "updates_per_env_step",
+            cfg.updates_per_env_step,
+            f"> 0 with updates_per_env_step * num_envs ({cfg.num_envs}) a whole number",
+        )
+    if cfg.log_std_min >= cfg.log_std_max:
+        _fail("log_std_min", cfg.log_std_min, f"< log_std_max ({cfg.log_std_max})")
+    if cfg.noisy_sigma_init < 0:
+        _fail("noisy_sigma_init", cfg.noisy_sigma_init, ">= 0")
+    for name in ("actor_lr", "critic_lr", "alpha_lr", "reward_scale", "init_alpha"):
+        if not getattr(cfg, name) > 0:
+            _fail(name, getattr(cfg, name), "> 0")
+    if not 0 <= cfg.gamma < 1:
+        _fail("gamma", cfg.gamma, "0 <= gamma < 1")
+    if not 0 < cfg.tau <= 1:
+        _fail("tau", cfg.tau, "0 < tau <= 1")
+    if cfg.per_alpha < 0:
+        _fail("per_alpha", cfg.per_alpha, ">= 0")
+    if not 0 <= cfg.per_beta0 <= 1:
+        _fail("per_beta0", cfg.per_beta0, "0 <= per_beta0 <= 1")
+    if not cfg.per_eps > 0:
+        _fail("per_eps", cfg.per_eps, "> 0")
+    if cfg.eps_demo < 0:
+        _fail("eps_demo", cfg.eps_demo, ">= 0")
+    if not 0 <= cfg.query_prob <= 1:
+        _fail("query_prob", cfg.query_prob, "0 <= b <= 1")
+    if not 0 < cfg.t_query <= 1:
+        _fail("t_query", cfg.t_query, "0 < t_query <= 1")
+    if not isinstance(cfg.demo_steps, int) or cfg.demo_steps < 1:
+        _fail("demo_steps", cfg.demo_steps, "an integer C >= 1")
+    if not isinstance(cfg.budget, int) or cfg.budget < 0:
+        _fail("budget", cfg.budget, "an integer >= 0")
+    if not isinstance(cfg.seed, int) or cfg.seed < 0:
+        _fail("seed", cfg.seed, "an integer >= 0")
+
+
+# ---------------------------------------------------------------- presets
+
+
+def tiny(**overrides: Any) -> Config:
+    """A seconds-long run on the pure-JAX toy env, for tests."""
+    base = dict(
+        env_name="toy",
+        num_envs=2,
+        episode_length=50,
+        total_env_steps=2_000,
+        learning_starts=200,
+        eval_every=500,
+        num_eval_episodes=4,
+        hidden_sizes=(32, 32),
+        batch_size=32,
+        replay_capacity=2_000,
+        window_size=50,
+        traces_per_eval=5,
+        state_sample_size=32,
+        budget=200,
+    )
+    base.update(overrides)
+    return Config(**base)
+
+
+def halfcheetah(**overrides: Any) -> Config:
+    """Plain SAC on MJX HalfCheetah, paper network and hyperparameters, 100k env steps."""
+    base: dict[str, Any] = dict(replay_capacity=100_000)
+    base.update(overrides)
+    return Config(**base)
+
+
+def paper(**overrides: Any) -> Config:
+    """The paper's protocol (appendix A.1): 400k steps, 1 env, budget 10k, N_r 5k, eval every 5k."""
+    base: dict[str, Any] = dict(
+        total_env_steps=400_000,
+        replay_capacity=400_000,
+        budget=10_000,
+        window_size=5_000,
+        eval_every=5_000,
+        num_envs=1,
+        num_eval_episodes=10,
+    )
+    base.update(overrides)
+    return Config(**base)
+
+
+PRESETS = {"tiny": tiny, "halfcheetah": halfcheetah, "paper": paper}

@@ -1,0 +1,97 @@
+"""The expert: a pre-trained SAC actor, saved with orbax-checkpoint beside a small JSON of metadata.
+
+The paper's expert is "a pre-trained prioritized SAC model" (A.1). `python -m arld_jax.run
+train_expert` trains one with this package's own trainer (strategy 'none') and saves the actor only.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from arld_jax.networks import Actor, deterministic_action, sample_action
+from arld_jax.types import Params, PRNGKey
+
+META_FILE = "expert.json"
+PARAMS_DIR = "actor"
+
+
+class Expert(NamedTuple):
+    """Expert parameters and a pure acting function act(params, obs [n, d], key) -> action [n, A]."""
+
+    params: Params
+    act: Callable[[Params, jax.Array, PRNGKey], jax.Array]
+    meta: dict[str, Any]
+
+
+def expert_from_actor(
+    actor: Actor, params: Params, meta: dict[str, Any], stochastic: bool = False
+) -> Expert:
+    """Wrap a trained actor. The expert acts with tanh(mu) unless `stochastic`."""
+
+    def act(p: Params, obs: jax.Array, key: PRNGKey) -> jax.Array:
+        k_noise, k_sample = jax.random.split(key)
+        pol = actor.apply(p, obs, k_noise, jnp.float32(0.0))
+        return sample_action(pol, k_sample)[0] if stochastic else deterministic_action(pol)
+
+    return Expert(params=params, act=act, meta=meta)
+
+
+def save_expert(path: str | Path, actor_params: Params, meta: dict[str, Any]) -> Path:
+    """Save actor parameters (orbax) and `meta` (JSON: dims, hidden sizes, return, seed, command)."""
+    import orbax.checkpoint as ocp
+
+    path = Path(path).absolute()
+    path.mkdir(parents=True, exist_ok=True)
+    ckpt = ocp.StandardCheckpointer()
+    ckpt.save(path / PARAMS_DIR, actor_params, force=True)
+    ckpt.wait_until_finished()
+    (path / META_FILE).write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
+    return path
+
+
+def load_expert(
+    path: str | Path, obs_dim: int, action_dim: int, stochastic: bool = False
+) -> Expert:
+    """Load an expert saved by `save_expert`, checking it fits the environment.
+
+    Raises FileNotFoundError if nothing is there and ValueError if its shapes do not fit."""
+    import orbax.checkpoint as ocp
+
+    path = Path(path).absolute()
+    meta_file = path / META_FILE
+    if not meta_file.is_file() or not (path / PARAMS_DIR).is_dir():
+        raise FileNotFoundError(
+            f"No expert at {path}: expected {META_FILE} and {PARAMS_DIR}/ there. Train one with "
+            "`python -m arld_jax.run train_expert`, or pass expert_path=experiments/expert "
+            "(the shipped HalfCheetah expert)."
+        )
+    meta = json.loads(meta_file.read_text())
+    if (meta.get("obs_dim"), meta.get("action_dim")) != (obs_dim, action_dim):
+        raise ValueError(
+            f"Expert at {path} was trained for obs_dim={meta.get('obs_dim')}, "
+            f"action_dim={meta.get('action_dim')} (env {meta.get('env_name')!r}), but this env has "
+            f"obs_dim={obs_dim}, action_dim={action_dim}."
+        )
+    actor = Actor(
+        action_dim=action_dim,
+        hidden_sizes=tuple(meta["hidden_sizes"]),
+        log_std_min=meta.get("log_std_min", -20.0),
+        log_std_max=meta.get("log_std_max", 2.0),
+    )
+    abstract = jax.eval_shape(
+        actor.init, jax.random.key(0), jnp.zeros((1, obs_dim)), jax.random.key(0), jnp.float32(0)
+    )
+    try:
+        params = ocp.StandardCheckpointer().restore(path / PARAMS_DIR, abstract)
+    except ValueError as err:
+        raise ValueError(
+            f"Expert at {path} does not match the actor its {META_FILE} describes "
+            f"(hidden_sizes={meta['hidden_sizes']}): {err}"
+        ) from err
+    return expert_from_actor(actor, params, meta, stochastic)

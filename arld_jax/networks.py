@@ -1,0 +1,159 @@
+"""Actor (tanh-Gaussian with an optionally noisy mean head) and twin critics.
+
+Paper A.1: actor = two hidden layers of 256 ReLU units, then two linear heads (mean and log-std of a
+Gaussian per action dimension), squashed by tanh into [-1, 1]; critic = two hidden layers of 256 ReLU
+units and a linear Q output. (A.1 says "tanh on the output layers"; we read that as the actor's action
+squashing only: a tanh on Q would cap returns at 1.)
+
+The mean head is always a `NoisyDense`. With `noise_scale = 0` it is exactly a plain linear layer
+(plain SAC); with `noise_scale = 1` the agent is Noisy SAC (paper 3.1). Keeping both agents on one
+parameter structure lets one compiled program vmap over the uncertainty choice.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import flax.linen as nn
+import flax.struct
+import jax
+import jax.numpy as jnp
+
+from arld_jax.types import PRNGKey
+
+NUM_CRITICS = 2
+
+
+@flax.struct.dataclass
+class PolicyOutput:
+    """The actor's output for a batch of observations (all [..., action_dim])."""
+
+    mean: jax.Array  # pre-tanh mean; the perturbed mean mu~ for Noisy SAC (paper 3.1)
+    log_std: jax.Array  # log sigma_theta(s), clipped
+    mean_var: jax.Array  # analytic Var[mu~] = phi^T diag(sigma_w^2) phi + sigma_b^2 (paper 3.1)
+
+
+class MLP(nn.Module):
+    """ReLU hidden layers; matmul inputs in `dtype`, outputs back in float32."""
+
+    hidden_sizes: Sequence[int]
+    dtype: jnp.dtype = jnp.float32
+
+    @nn.compact
+    def __call__(self, x: jax.Array) -> jax.Array:
+        for width in self.hidden_sizes:
+            x = nn.relu(nn.Dense(width, dtype=self.dtype)(x))
+        return x.astype(jnp.float32)
+
+
+class NoisyDense(nn.Module):
+    """Linear layer with independent Gaussian weight noise (Fortunato et al. 2017, 'independent').
+
+    w = mu_w + noise_scale * sigma_w * eps_w and b = mu_b + noise_scale * sigma_b * eps_b, with fresh
+    eps ~ N(0, 1) at every call, shared across the leading batch axes (as in NoisyNet). Independent
+    (not factorised) noise is what makes the paper's analytic variance exact: each weight is then an
+    independent Gaussian, w_ij ~ N(mu_w_ij, sigma_w_ij^2).
+    """
+
+    features: int
+    sigma_init: float = 0.017
+
+    @nn.compact
+    def __call__(
+        self, x: jax.Array, noise_key: PRNGKey, noise_scale: jax.Array
+    ) -> tuple[jax.Array, jax.Array]:
+        in_features = x.shape[-1]
+        bound = 1.0 / jnp.sqrt(in_features)
+        uniform = lambda key, shape: jax.random.uniform(key, shape, minval=-bound, maxval=bound)  # noqa: E731
+        const = nn.initializers.constant(self.sigma_init)
+        mu_w = self.param("mu_w", uniform, (in_features, self.features))
+        sigma_w = self.param("sigma_w", const, (in_features, self.features))
+        mu_b = self.param("mu_b", uniform, (self.features,))
+        sigma_b = self.param("sigma_b", const, (self.features,))
+        k_w, k_b = jax.random.split(noise_key)
+        eps_w = jax.random.normal(k_w, mu_w.shape)
+        eps_b = jax.random.normal(k_b, mu_b.shape)
+        w = mu_w + noise_scale * sigma_w * eps_w
+        b = mu_b + noise_scale * sigma_b * eps_b
+        out = x @ w + b
+        # Paper 3.1: Var[w phi + b] = phi^T diag(sigma_w^2) phi + Var[b]. The paper writes "+ sigma_b";
+        # the variance of b ~ N(mu_b, sigma_b^2) is sigma_b^2, which is what we use.
+        var = jnp.square(x) @ jnp.square(sigma_w) + jnp.square(sigma_b)
+        return out, var
+
+
+class Actor(nn.Module):
+    """Tanh-Gaussian policy pi(a|s) = tanh(N(mu(s), sigma(s)^2)) with a (possibly noisy) mean head."""
+
+    action_dim: int
+    hidden_sizes: Sequence[int] = (256, 256)
+    log_std_min: float = -20.0
+    log_std_max: float = 2.0
+    sigma_init: float = 0.017
+    dtype: jnp.dtype = jnp.float32
+
+    @nn.compact
+    def __call__(self, obs: jax.Array, noise_key: PRNGKey, noise_scale: jax.Array) -> PolicyOutput:
+        phi = MLP(self.hidden_sizes, self.dtype)(obs)  # phi(s): the mean head's input
+        mean, mean_var = NoisyDense(self.action_dim, self.sigma_init, name="mean_head")(
+            phi, noise_key, noise_scale
+        )
+        log_std = nn.Dense(self.action_dim, name="log_std_head")(phi)
+        log_std = jnp.clip(log_std, self.log_std_min, self.log_std_max)
+        return PolicyOutput(mean=mean, log_std=log_std, mean_var=mean_var)
+
+
+class QNetwork(nn.Module):
+    """One critic Q(s, a)."""
+
+    hidden_sizes: Sequence[int] = (256, 256)
+    dtype: jnp.dtype = jnp.float32
+
+    @nn.compact
+    def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
+        x = MLP(self.hidden_sizes, self.dtype)(jnp.concatenate([obs, action], axis=-1))
+        return nn.Dense(1)(x)[..., 0]
+
+
+class TwinCritic(nn.Module):
+    """NUM_CRITICS independent critics evaluated as one batched matmul; output [..., NUM_CRITICS]."""
+
+    hidden_sizes: Sequence[int] = (256, 256)
+    dtype: jnp.dtype = jnp.float32
+
+    @nn.compact
+    def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
+        ensemble = nn.vmap(
+            QNetwork,
+            variable_axes={"params": 0},
+            split_rngs={"params": True},
+            in_axes=None,
+            out_axes=-1,
+            axis_size=NUM_CRITICS,
+        )
+        return ensemble(self.hidden_sizes, self.dtype)(obs, action)
+
+
+# ---------------------------------------------------------------- tanh-Gaussian helpers
+
+_LOG_2 = jnp.log(2.0)
+
+
+def tanh_log_det_jacobian(pre_tanh: jax.Array) -> jax.Array:
+    """log |d tanh(u)/du| = log(1 - tanh(u)^2), in the stable form 2 (log 2 - u - softplus(-2u))."""
+    return 2.0 * (_LOG_2 - pre_tanh - jax.nn.softplus(-2.0 * pre_tanh))
+
+
+def sample_action(policy: PolicyOutput, key: PRNGKey) -> tuple[jax.Array, jax.Array]:
+    """a = tanh(mu + sigma * xi), xi ~ N(0, I) (paper 3.2), and log pi(a|s) summed over dimensions."""
+    std = jnp.exp(policy.log_std)
+    xi = jax.random.normal(key, policy.mean.shape)
+    pre_tanh = policy.mean + std * xi
+    gaussian_log_prob = -0.5 * jnp.square(xi) - policy.log_std - 0.5 * jnp.log(2.0 * jnp.pi)
+    log_prob = jnp.sum(gaussian_log_prob - tanh_log_det_jacobian(pre_tanh), axis=-1)
+    return jnp.tanh(pre_tanh), log_prob
+
+
+def deterministic_action(policy: PolicyOutput) -> jax.Array:
+    """The evaluation action tanh(mu(s)) (paper 3.2: noise removed when validating)."""
+    return jnp.tanh(policy.mean)

@@ -1,0 +1,434 @@
+"""The summary table of a sweep's run directory: numpy, scipy and the files `run.py` writes, no JAX.
+
+A run directory holds (see `arld_jax.run`):
+
+* ``config.json``: ``{"config": {...Config fields...}, "sweep": {field: [values]}, "seeds": [...],
+  "preset": ..., "command": ..., "expert": {"eval_return": ...} | null}``
+* ``runs.json``: one dict per run, in run order: run, cell, cell_label, seed and every sweepable
+  field.
+* ``metrics.npz``: arrays ``[num_runs, num_periods, ...]``, one period per evaluation.
+* ``timing.json`` (optional): wall_seconds, env_steps_per_second, compile_seconds.
+
+A sweep that is still running leaves a *partial* directory whose metrics hold fewer periods than
+``total_env_steps // eval_every``. Everything here then summarises the periods present and says so.
+
+Statistics are over seeds within a cell: the mean and the half-width of the 95% confidence interval
+of the mean (Student's t with n - 1 degrees of freedom), see `mean_ci95`.
+
+Command line: ``python -m arld_jax.results RUN_DIR`` writes summary.csv and summary.md and prints
+the Markdown.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+REQUIRED_FILES: tuple[str, ...] = ("config.json", "runs.json", "metrics.npz")
+"""Files a run directory must have before it can be summarised or plotted."""
+
+STAT_COLUMNS: tuple[str, ...] = (
+    "n_seeds",
+    "final_return_mean",
+    "final_return_ci95",
+    "auc_mean",
+    "auc_ci95",
+    "demos_used_mean",
+    "demos_used_ci95",
+    "expert_return",
+    "env_steps_per_second",
+    "periods",
+    "env_steps",
+)
+"""Columns of a summary row after ``cell``, ``cell_label`` and the swept fields."""
+
+
+# -------------------------------------------------------------------------------------------------
+# statistics
+# -------------------------------------------------------------------------------------------------
+
+
+def mean_ci95(values: np.ndarray) -> tuple[float, float]:
+    """Mean and half-width of the 95% confidence interval of the mean.
+
+    NaNs are dropped first. The half-width is ``t.ppf(0.975, n - 1) * sd / sqrt(n)`` with the sample
+    standard deviation (ddof=1) and Student's t with n - 1 degrees of freedom. One value gives a
+    half-width of nan (no spread to estimate); no values give ``(nan, nan)``.
+    """
+    x = np.asarray(values, dtype=np.float64).ravel()
+    x = x[~np.isnan(x)]
+    n = x.size
+    if n == 0:
+        return math.nan, math.nan
+    mean = float(x.mean())
+    if n == 1:
+        return mean, math.nan
+    sd = float(x.std(ddof=1))
+    return mean, float(stats.t.ppf(0.975, n - 1) * sd / math.sqrt(n))
+
+
+def mean_ci95_columns(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`mean_ci95` of every column of ``values`` [n, m] (e.g. runs x periods), NaNs dropped.
+
+    Returns ``(mean [m], half_width [m])``; a column with one finite value has half-width nan, a
+    column with none has mean nan too.
+    """
+    x = np.asarray(values, dtype=np.float64)
+    if x.ndim != 2:
+        raise ValueError(f"values must be 2-D [n, m], got shape {x.shape}")
+    finite = ~np.isnan(x)
+    n = finite.sum(axis=0)
+    with warnings.catch_warnings(), np.errstate(invalid="ignore", divide="ignore"):
+        warnings.simplefilter("ignore", RuntimeWarning)
+        mean = np.nanmean(x, axis=0)
+        sd = np.nanstd(x, axis=0, ddof=1)
+        t = stats.t.ppf(0.975, np.maximum(n - 1, 1))
+        half = t * sd / np.sqrt(n)
+    half = np.where(n >= 2, half, np.nan)
+    mean = np.where(n >= 1, mean, np.nan)
+    return mean, half
+
+
+def area_under_curve(eval_return: np.ndarray, env_steps: np.ndarray) -> np.ndarray:
+    """Normalised area under each run's evaluation curve: its mean evaluation return.
+
+    Definition: ``auc[r] = mean_p eval_return[r, p]``, the simple average of the evaluation returns
+    over the P evaluation points (no trapezoid). With evaluations every ``eval_every`` env steps
+    this is the area under the step curve that holds each evaluation for its period, divided by the
+    length of the run, so it has the units of a return and is comparable between runs of different
+    lengths (and between a partial run and a finished one, as "the average return so far"). A NaN
+    evaluation makes that run's AUC NaN (and `mean_ci95` then leaves that run out).
+
+    Args:
+        eval_return: [R, P] evaluation returns.
+        env_steps: [P] (or [R, P]) env steps of the evaluations; only checked against P, since the
+            evaluations are equally spaced.
+
+    Returns:
+        [R] AUC per run.
+    """
+    ret = np.asarray(eval_return, dtype=np.float64)
+    steps = np.asarray(env_steps)
+    if ret.ndim != 2:
+        raise ValueError(f"eval_return must be [runs, periods], got shape {ret.shape}")
+    if steps.shape[-1] != ret.shape[1]:
+        raise ValueError(
+            f"env_steps has {steps.shape[-1]} evaluation points but eval_return has {ret.shape[1]}"
+        )
+    if ret.shape[1] == 0:
+        return np.full(ret.shape[0], np.nan)
+    return ret.mean(axis=1)
+
+
+# -------------------------------------------------------------------------------------------------
+# loading
+# -------------------------------------------------------------------------------------------------
+
+
+def load_run(run_dir: str | Path) -> dict[str, Any]:
+    """Load a run directory.
+
+    Returns a dict with ``path`` (Path), ``config`` (the whole config.json: config, sweep, seeds,
+    preset, command, expert), ``runs`` (runs.json, one dict per run), ``metrics`` (dict of numpy
+    arrays from metrics.npz), ``timing`` (timing.json, or {} if absent), ``periods`` (evaluation
+    periods present), ``expected_periods`` (total_env_steps // eval_every), ``partial`` (fewer
+    periods present than expected) and ``missing_runs`` (runs listed in runs.json but not yet in
+    metrics.npz; normally 0).
+
+    Raises:
+        FileNotFoundError: the directory or one of config.json, runs.json, metrics.npz is missing.
+        ValueError: the files are unreadable or inconsistent.
+    """
+    path = Path(run_dir)
+    if not path.is_dir():
+        raise FileNotFoundError(f"run directory {path} does not exist")
+    missing = [name for name in REQUIRED_FILES if not (path / name).is_file()]
+    if missing:
+        raise FileNotFoundError(
+            f"run directory {path} has no {' or '.join(missing)} (a run directory needs "
+            f"{', '.join(REQUIRED_FILES)}). If a sweep is writing it, the sweep may not have "
+            "finished its first chunk yet: metrics.npz appears after the first chunk of training."
+        )
+    config = json.loads((path / "config.json").read_text())
+    runs = json.loads((path / "runs.json").read_text())
+    try:
+        with np.load(path / "metrics.npz", allow_pickle=False) as npz:
+            metrics = {key: np.asarray(npz[key]) for key in npz.files}
+    except (OSError, ValueError, EOFError) as err:
+        raise ValueError(
+            f"cannot read {path / 'metrics.npz'} ({err}); the sweep may be writing it right now, "
+            "try again in a moment"
+        ) from err
+    timing_path = path / "timing.json"
+    timing = json.loads(timing_path.read_text()) if timing_path.is_file() else {}
+
+    if "eval_return" not in metrics:
+        raise ValueError(f"{path / 'metrics.npz'} has no eval_return (has {sorted(metrics)})")
+    num_runs, periods = metrics["eval_return"].shape[:2]
+    if num_runs > len(runs):
+        raise ValueError(
+            f"{path}: metrics.npz has {num_runs} runs but runs.json lists only {len(runs)}"
+        )
+    missing_runs = len(runs) - num_runs
+    runs = runs[:num_runs]
+    cfg = config.get("config", {})
+    eval_every = int(cfg.get("eval_every") or 0)
+    total = int(cfg.get("total_env_steps") or 0)
+    expected = total // eval_every if eval_every > 0 else periods
+    return {
+        "path": path,
+        "config": config,
+        "runs": runs,
+        "metrics": metrics,
+        "timing": timing,
+        "periods": int(periods),
+        "expected_periods": int(expected),
+        "partial": bool(periods < expected or missing_runs > 0),
+        "missing_runs": int(missing_runs),
+    }
+
+
+def _as_run(run: dict[str, Any] | str | Path) -> dict[str, Any]:
+    """Accept a loaded run dict or a directory."""
+    return run if isinstance(run, dict) else load_run(run)
+
+
+def run_field(run: dict[str, Any], index: int, name: str, default: Any = None) -> Any:
+    """Field ``name`` of run ``index``: from runs.json, else from the config, else ``default``."""
+    entry = run["runs"][index]
+    if name in entry:
+        return entry[name]
+    return run["config"].get("config", {}).get(name, default)
+
+
+def swept_fields(run: dict[str, Any]) -> list[str]:
+    """The swept fields that tell cells apart (the config's sweep keys, without seed)."""
+    return [name for name in run["config"].get("sweep") or {} if name != "seed"]
+
+
+def env_steps_axis(run: dict[str, Any]) -> np.ndarray:
+    """[P] env steps of the evaluations present (metrics env_steps is [R, P] or [P])."""
+    metrics = run["metrics"]
+    if "env_steps" in metrics:
+        steps = np.asarray(metrics["env_steps"])
+        return steps[0] if steps.ndim == 2 else steps
+    eval_every = int(run["config"].get("config", {}).get("eval_every", 1))
+    return (np.arange(run["periods"]) + 1) * eval_every
+
+
+def group_cells(run: dict[str, Any]) -> list[dict[str, Any]]:
+    """The cells of a run directory in cell order.
+
+    Each cell is ``{"cell": id, "cell_label": str, "runs": [run indices], "seeds": [...],
+    "fields": runs.json entry of its first run}``; runs of one cell differ only in seed.
+    """
+    cells: dict[Any, dict[str, Any]] = {}
+    for index, entry in enumerate(run["runs"]):
+        key = entry.get("cell", entry.get("cell_label", 0))
+        if key not in cells:
+            cells[key] = {
+                "cell": key,
+                "cell_label": str(entry.get("cell_label", "")),
+                "runs": [],
+                "seeds": [],
+                "fields": dict(entry),
+            }
+        cells[key]["runs"].append(index)
+        cells[key]["seeds"].append(entry.get("seed", run_field(run, index, "seed")))
+    out = list(cells.values())
+    if all(isinstance(c["cell"], int) for c in out):
+        out.sort(key=lambda c: c["cell"])
+    return out
+
+
+def expert_return(run: dict[str, Any]) -> float:
+    """The expert's evaluation return from config.json, or nan when there is no expert."""
+    expert = run["config"].get("expert") or {}
+    value = expert.get("eval_return") if isinstance(expert, dict) else None
+    return float(value) if value is not None else math.nan
+
+
+# -------------------------------------------------------------------------------------------------
+# summary
+# -------------------------------------------------------------------------------------------------
+
+
+def summarize(run_dir: str | Path | dict[str, Any]) -> list[dict[str, Any]]:
+    """One row per cell, in cell order, over the evaluation periods present.
+
+    Row keys: ``cell``, ``cell_label``, the swept fields' values, then `STAT_COLUMNS`:
+    n_seeds; final_return_mean/ci95 (eval return at the last evaluation present); auc_mean/ci95
+    (`area_under_curve`); demos_used_mean/ci95 (final cumulative demonstrations); expert_return
+    (config.json, or nan); env_steps_per_second (timing.json, all runs together, or nan); periods
+    (evaluation periods present) and env_steps (env steps at the last evaluation present).
+    Means and 95% CIs are over the seeds of the cell (`mean_ci95`).
+    """
+    run = _as_run(run_dir)
+    metrics = run["metrics"]
+    steps = env_steps_axis(run)
+    eval_return = np.asarray(metrics["eval_return"], dtype=np.float64)
+    auc = area_under_curve(eval_return, steps)
+    demos = metrics.get("demos_used")
+    expert = expert_return(run)
+    sps = float(run["timing"].get("env_steps_per_second", math.nan))
+    periods = run["periods"]
+    fields = swept_fields(run)
+
+    rows = []
+    for cell in group_cells(run):
+        idx = np.asarray(cell["runs"])
+        final = eval_return[idx, -1] if periods else np.full(idx.size, np.nan)
+        final_demos = (
+            np.asarray(demos, dtype=np.float64)[idx, -1]
+            if demos is not None and periods
+            else np.full(idx.size, np.nan)
+        )
+        row: dict[str, Any] = {"cell": cell["cell"], "cell_label": cell["cell_label"]}
+        for name in fields:
+            row[name] = run_field(run, cell["runs"][0], name)
+        row["n_seeds"] = int(idx.size)
+        row["final_return_mean"], row["final_return_ci95"] = mean_ci95(final)
+        row["auc_mean"], row["auc_ci95"] = mean_ci95(auc[idx])
+        row["demos_used_mean"], row["demos_used_ci95"] = mean_ci95(final_demos)
+        row["expert_return"] = expert
+        row["env_steps_per_second"] = sps
+        row["periods"] = int(periods)
+        row["env_steps"] = int(steps[-1]) if periods else 0
+        rows.append(row)
+    return rows
+
+
+def format_mean_ci(mean: float, ci: float) -> str:
+    """Format as "mean ± ci", rounded to two significant digits of the CI.
+
+    Never more precise than 4 decimals nor coarser than whole numbers; "± n/a" when the CI is
+    unknown (one seed).
+    """
+    if not math.isfinite(mean):
+        return "nan"
+    if math.isfinite(ci) and ci > 0:
+        decimals = min(4, max(0, 1 - math.floor(math.log10(ci))))
+    else:
+        magnitude = abs(mean)
+        if magnitude == 0 or float(mean).is_integer():
+            decimals = 0
+        else:
+            decimals = min(4, max(0, 2 - math.floor(math.log10(magnitude))))
+    ci_text = f"{ci:.{decimals}f}" if math.isfinite(ci) else "n/a"
+    return f"{mean:.{decimals}f} ± {ci_text}"
+
+
+def _format_field(value: Any) -> str:
+    """A swept field's value for the Markdown table."""
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+def _markdown(run: dict[str, Any], rows: list[dict[str, Any]]) -> str:
+    """The Markdown summary: a header stating what the numbers are, then one table row per cell."""
+    config = run["config"]
+    cfg = config.get("config", {})
+    total = int(cfg.get("total_env_steps") or 0)
+    last = rows[0]["env_steps"] if rows else 0
+    seeds = config.get("seeds", [])
+    seed_counts = sorted({row["n_seeds"] for row in rows})
+    per_cell = "/".join(str(n) for n in seed_counts)
+    lines = [f"# Sweep summary: {run['path'].name}", ""]
+    if run["partial"]:
+        note = (
+            f"**Partial run directory**: {run['periods']} of {run['expected_periods']} evaluation "
+            f"periods present ({last:,} of {total:,} env steps per run)"
+        )
+        if run["missing_runs"]:
+            note += f", {run['missing_runs']} runs not in metrics.npz yet"
+        lines += [
+            note + "; the sweep is probably still running and every number below is over "
+            "the periods present.",
+            "",
+        ]
+    header = [
+        f"Env steps per run: {last:,}" + (f" of {total:,}" if total and total != last else ""),
+        f"env: {cfg.get('env_name', '?')}",
+        f"cells: {len(rows)}",
+        f"seeds per cell: {per_cell} ({seeds})",
+    ]
+    expert = expert_return(run)
+    if math.isfinite(expert):
+        header.append(f"expert return: {expert:.1f}")
+    sps = run["timing"].get("env_steps_per_second")
+    if sps is not None:
+        header.append(f"throughput: {float(sps):,.0f} env steps/s (all runs together)")
+    lines += [" · ".join(header) + ".", ""]
+    lines += [
+        "Cells are mean ± half-width of the 95% confidence interval of the mean over seeds "
+        "(Student's t, n − 1 dof; n/a with one seed). Final return: evaluation return at the last "
+        "evaluation present. AUC: mean evaluation return over all evaluation points present. "
+        "Demos: cumulative demonstrated env steps at the end.",
+        "",
+    ]
+    if config.get("command"):
+        lines += [f"Command: `{config['command']}`", ""]
+
+    fields = swept_fields(run)
+    columns = [
+        "cell",
+        *(fields or ["label"]),
+        "seeds",
+        "final return",
+        "AUC (mean return)",
+        "demos used",
+    ]
+    lines.append("| " + " | ".join(columns) + " |")
+    text_columns = {"label"} | {f for f in fields if any(isinstance(row[f], str) for row in rows)}
+    lines.append("|" + "|".join("---" if c in text_columns else "---:" for c in columns) + "|")
+    for row in rows:
+        values = [str(row["cell"])]
+        values += [_format_field(row[f]) for f in fields] if fields else [row["cell_label"] or "-"]
+        values += [
+            str(row["n_seeds"]),
+            format_mean_ci(row["final_return_mean"], row["final_return_ci95"]),
+            format_mean_ci(row["auc_mean"], row["auc_ci95"]),
+            format_mean_ci(row["demos_used_mean"], row["demos_used_ci95"]),
+        ]
+        lines.append("| " + " | ".join(values) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def write_summary(run_dir: str | Path) -> tuple[Path, Path]:
+    """Write ``summary.csv`` (one row per cell, columns as in `summarize`) and ``summary.md`` (a
+    Markdown table of "mean ± ci" cells under a header stating env steps, seeds and what the CI is)
+    into the run directory and return their paths."""
+    run = load_run(run_dir)
+    rows = summarize(run)
+    columns = ["cell", "cell_label", *swept_fields(run), *STAT_COLUMNS]
+    csv_path = run["path"] / "summary.csv"
+    with csv_path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=columns)
+        writer.writeheader()
+        writer.writerows(rows)
+    md_path = run["path"] / "summary.md"
+    md_path.write_text(_markdown(run, rows))
+    return csv_path, md_path
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``python -m arld_jax.results RUN_DIR``: write the summary files and print the Markdown."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run_dir", type=Path)
+    args = parser.parse_args(argv)
+    csv_path, md_path = write_summary(args.run_dir)
+    print(md_path.read_text())
+    print(f"wrote {csv_path} and {md_path}")
+
+
+if __name__ == "__main__":
+    main()

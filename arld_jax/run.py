@@ -1,0 +1,533 @@
+"""Command line: the only impure code (timing, progress, checkpoints, files, plots).
+
+    python -m arld_jax.run seed_sweep [--preset NAME] [--FIELD VALUE[,VALUE...]] [--seeds 0,1,2] [--out DIR]
+    python -m arld_jax.run train_expert [--FIELD VALUE] [--seeds 0,1,2] [--out DIR]
+    python -m arld_jax.run plot RUN_DIR
+
+A comma-separated list for a sweepable field sweeps it inside one compiled program (vmap); the run
+axis (cells x seeds) is sharded over devices when more than one is visible. The scan runs in chunks
+of evaluation periods; after each chunk the complete training state is checkpointed (orbax), so
+re-running the same command with the same --out resumes, and ends with results identical to an
+uninterrupted run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import dataclasses
+import difflib
+import inspect
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from arld_jax import config as config_mod
+from arld_jax.config import SWEEPABLE, Config
+from arld_jax.sweep import REPO_ROOT, SHIPPED_EXPERT, SWEEP_PRESETS, Sweep
+
+CHECKPOINT_DIR = "checkpoints"
+METRICS_FILE = "metrics.npz"
+
+
+# ---------------------------------------------------------------- field docs and parsing
+
+
+def field_docs() -> dict[str, str]:
+    """Config field -> its docstring (the string literal under each field in config.py)."""
+    tree = ast.parse(inspect.getsource(config_mod))
+    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "Config")
+    docs, last = {}, None
+    for node in cls.body:
+        if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            last = node.target.id
+        elif isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant) and last:
+            docs[last] = " ".join(str(node.value.value).split())
+            last = None
+        else:
+            last = None
+    return docs
+
+
+FIELDS = {f.name: f for f in dataclasses.fields(Config) if f.name != "notes"}
+
+
+def parse_value(name: str, text: str) -> Any:
+    """Parse one command-line value for Config field `name`, by the type of its default."""
+    default = FIELDS[name].default
+    try:
+        if name == "hidden_sizes":
+            return tuple(int(v) for v in text.replace("x", ",").split(",") if v)
+        if name == "expert_path":
+            return None if text.lower() in ("", "none") else text
+        if isinstance(default, bool):
+            if text.lower() in ("1", "true", "yes", "on"):
+                return True
+            if text.lower() in ("0", "false", "no", "off"):
+                return False
+            raise ValueError(text)
+        if isinstance(default, int):
+            return int(text)
+        if isinstance(default, float):
+            return float(text)
+        return text
+    except ValueError:
+        kind = type(default).__name__ if default is not None else "str"
+        raise SystemExit(f"error: --{name} {text!r} is not a valid {kind}") from None
+
+
+def apply_overrides(base: Sweep, overrides: dict[str, str]) -> Sweep:
+    """Apply --FIELD VALUE overrides: a comma list on a sweepable field sweeps it."""
+    fields, sweep, seeds = {}, dict(base.sweep), base.seeds
+    for name, text in overrides.items():
+        if name == "seeds":
+            seeds = tuple(int(s) for s in text.split(",") if s)
+            continue
+        if name == "num_seeds":
+            seeds = tuple(range(int(text)))
+            continue
+        parts = [p for p in text.split(",")] if name != "hidden_sizes" else [text]
+        values = [parse_value(name, p) for p in parts]
+        if len(values) > 1:
+            if name not in SWEEPABLE:
+                raise SystemExit(
+                    f"error: --{name} got a list ({text}) but {name} sets shapes or program structure "
+                    f"and cannot be swept in one program; sweepable: {', '.join(SWEEPABLE)}"
+                )
+            sweep[name] = tuple(values)
+        else:
+            sweep.pop(name, None)
+            fields[name] = values[0]
+    try:
+        return Sweep(cfg=base.cfg.replace(**fields), sweep=sweep, seeds=seeds)
+    except ValueError as err:
+        raise SystemExit(f"error: {err}") from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    docs = field_docs()
+    parser = argparse.ArgumentParser(
+        prog="python -m arld_jax.run",
+        description="ARLD (SAC / Noisy SAC + expert queries) on MJX HalfCheetah.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    presets = "; ".join(
+        f"{k}: {inspect.getdoc(v).splitlines()[0]}" for k, v in SWEEP_PRESETS.items()
+    )
+    for name, help_text in (
+        ("seed_sweep", "train a sweep of runs (cells x seeds) in one compiled program"),
+        ("train_expert", "train plain SAC over seeds and save the best actor as the expert"),
+    ):
+        p = sub.add_parser(
+            name,
+            help=help_text,
+            description=help_text + ". A comma list on a sweepable field sweeps it (vmapped).",
+            formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        )
+        p.add_argument(
+            "--preset",
+            default="default" if name == "seed_sweep" else "expert",
+            choices=list(SWEEP_PRESETS) + (["expert"] if name == "train_expert" else []),
+            help=f"named starting point ({presets})",
+        )
+        p.add_argument(
+            "--out", default=None, help="output directory (resumes if it holds this run)"
+        )
+        p.add_argument("--seeds", default=None, help="comma-separated seeds, e.g. 0,1,2")
+        p.add_argument("--num_seeds", default=None, help="seeds 0..N-1")
+        p.add_argument(
+            "--chunk_periods",
+            type=int,
+            default=None,
+            help="evaluation periods per compiled chunk (checkpoint after each); default: ~10 chunks",
+        )
+        p.add_argument("--no_plots", action="store_true", help="skip the figures")
+        p.add_argument(
+            "--stop_after_chunks",
+            type=int,
+            default=None,
+            help="stop after this many chunks (to test resuming)",
+        )
+        group = p.add_argument_group("config fields (sweepable ones accept comma lists)")
+        for field_name, f in FIELDS.items():
+            sweepable = " [sweepable]" if field_name in SWEEPABLE else ""
+            group.add_argument(
+                f"--{field_name}",
+                default=None,
+                metavar="V",
+                help=f"{docs.get(field_name, '')}{sweepable} (Config default: {f.default!r})",
+            )
+    plot = sub.add_parser("plot", help="(re)draw figures and summary of a run directory")
+    plot.add_argument("run_dir")
+    return parser
+
+
+def parse_args(argv: list[str]) -> tuple[argparse.Namespace, Sweep | None]:
+    """Parse the command line; unknown options fail with close matches."""
+    parser = build_parser()
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:
+        options = ["--" + n for n in FIELDS] + ["--preset", "--out", "--seeds", "--num_seeds"]
+        msgs = []
+        for u in unknown:
+            if u.startswith("--"):
+                key = u.split("=")[0]
+                close = difflib.get_close_matches(key, options, n=3, cutoff=0.6)
+                hint = f" (did you mean {', '.join(close)}?)" if close else ""
+                msgs.append(f"unknown option {key}{hint}")
+            else:
+                msgs.append(f"unexpected argument {u!r}")
+        parser.error("; ".join(msgs) + ". See --help for every field.")
+    if args.command == "plot":
+        return args, None
+    overrides = {
+        n: getattr(args, n)
+        for n in list(FIELDS) + ["seeds", "num_seeds"]
+        if getattr(args, n, None) is not None
+    }
+    base = expert_sweep() if args.preset == "expert" else SWEEP_PRESETS[args.preset]()
+    return args, apply_overrides(base, overrides)
+
+
+def expert_sweep() -> Sweep:
+    """Plain SAC, 3 seeds, 100k env steps: the expert's training (and a SAC learning curve)."""
+    cfg = Config(total_env_steps=100_000, replay_capacity=100_000, eval_every=5_000)
+    return Sweep(cfg=cfg, seeds=(0, 1, 2))
+
+
+# ---------------------------------------------------------------- the resumable driver
+
+
+def _default_out(command: str, preset: str) -> Path:
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    return REPO_ROOT / "runs" / f"{command}-{preset}-{stamp}"
+
+
+def _check_or_write_identity(out: Path, identity: dict[str, Any]) -> bool:
+    """Write config.json, or check it matches. Returns True if the directory already held this run."""
+    path = out / "config.json"
+    if path.exists():
+        saved = json.loads(path.read_text())
+        keys = ("config", "sweep", "seeds")
+        old = {k: saved.get(k) for k in keys}
+        new = json.loads(json.dumps({k: identity[k] for k in keys}))
+        if old != new:
+            diffs = []
+            for k in keys:
+                if k == "config":
+                    diffs += [
+                        f"{f}: {old[k].get(f)!r} -> {new[k].get(f)!r}"
+                        for f in sorted(set(old[k]) | set(new[k]))
+                        if old[k].get(f) != new[k].get(f)
+                    ]
+                elif old[k] != new[k]:
+                    diffs.append(f"{k}: {old[k]!r} -> {new[k]!r}")
+            raise SystemExit(
+                f"error: {out} holds a different run ({'; '.join(diffs)}). Nothing was overwritten: "
+                "use another --out, or the same settings to resume."
+            )
+        return True
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(identity, indent=2) + "\n")
+    os.replace(tmp, path)
+    return False
+
+
+def _save_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez_compressed(tmp, **arrays)
+    os.replace(tmp, path)
+
+
+def _choose_chunk(num_evals: int, requested: int | None) -> int:
+    if requested is not None:
+        if requested < 1 or num_evals % requested:
+            raise SystemExit(
+                f"error: --chunk_periods {requested} must be >= 1 and divide the number of "
+                f"evaluation periods ({num_evals})"
+            )
+        return requested
+    divisors = [d for d in range(1, num_evals + 1) if num_evals % d == 0]
+    return min(divisors, key=lambda d: (abs(num_evals // d - 10), d))
+
+
+def run_sweep(
+    sweep: Sweep,
+    out: Path,
+    chunk_periods: int | None = None,
+    stop_after_chunks: int | None = None,
+    command: str = "",
+    preset: str = "",
+    plots: bool = True,
+    log=print,  # noqa: ANN001
+) -> dict[str, Any]:
+    """Train every run of `sweep` into `out`, resuming from its checkpoint if there is one.
+
+    Returns {"metrics": {field: [R, periods, ...]}, "complete": bool, ...}."""
+    import jax
+    import jax.numpy as jnp
+    import orbax.checkpoint as ocp
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+    from arld_jax.train import make_train
+
+    cfg = sweep.cfg
+    expert = None
+    if sweep.needs_expert():
+        expert = _expert_for(cfg)
+    trainer = make_train(cfg, expert)
+    identity = sweep.to_json() | {
+        "preset": preset,
+        "command": command,
+        "expert": expert.meta if expert is not None else None,
+        "devices": [str(d) for d in jax.devices()],
+    }
+    resumed = _check_or_write_identity(out, identity)
+    (out / "runs.json").write_text(json.dumps(sweep.runs(), indent=1) + "\n")
+
+    # Runs axis, padded to a multiple of the device count and sharded over devices.
+    hps, keys = sweep.hparams_and_keys()
+    num_runs = sweep.num_runs
+    devices = jax.devices()
+    padded = -(-num_runs // len(devices)) * len(devices)
+    pad = lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], padded - num_runs, 0)])  # noqa: E731
+    hps, keys = jax.tree.map(pad, hps), pad(keys)
+    mesh = Mesh(np.array(devices), ("runs",))
+    sharding = NamedSharding(mesh, PartitionSpec("runs"))
+    hps, keys = jax.device_put((hps, keys), sharding)
+
+    chunk = _choose_chunk(cfg.num_evals, chunk_periods)
+    num_chunks = cfg.num_evals // chunk
+    init = jax.jit(jax.vmap(trainer.init), out_shardings=sharding)
+    run_chunk = jax.jit(
+        jax.vmap(trainer.run_periods, in_axes=(0, 0, None, None)),
+        static_argnums=3,
+        donate_argnums=0,
+    )
+
+    mngr = ocp.CheckpointManager(
+        (out / CHECKPOINT_DIR).absolute(),
+        options=ocp.CheckpointManagerOptions(max_to_keep=2, create=True),
+    )
+    t0 = time.time()
+    state = init(keys, hps)
+    metrics: dict[str, np.ndarray] = {}
+    done = 0
+    if resumed and mngr.latest_step() is not None:
+        done = mngr.latest_step()
+        abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, _keys_to_data(state))
+        restored = mngr.restore(done, args=ocp.args.StandardRestore(abstract))
+        state = _data_to_keys(restored, state)
+        saved = np.load(out / METRICS_FILE)
+        metrics = {
+            k: saved[k][:, : done * chunk] for k in saved.files if not k.startswith("state_")
+        }
+        log(
+            f"resuming {out} after chunk {done}/{num_chunks} ({done * chunk * cfg.eval_every:,} env steps)"
+        )
+    compile_start = time.time()
+    compiled = run_chunk.lower(state, hps, jnp.int32(0), chunk).compile()
+    compile_seconds = time.time() - compile_start
+    log(
+        f"compiled in {compile_seconds:.0f} s; {num_runs} runs x {cfg.total_env_steps:,} env steps, "
+        f"{num_chunks} chunks of {chunk * cfg.eval_every:,} steps, {len(devices)} device(s)"
+    )
+
+    train_seconds = 0.0
+    chunks_this_call = 0
+    for c in range(done, num_chunks):
+        start = time.time()
+        state, m = compiled(state, hps, jnp.int32(c * chunk))
+        m = jax.tree.map(lambda x: np.asarray(x)[:num_runs], m)
+        train_seconds += time.time() - start
+        for k, v in dataclasses.asdict(m).items():
+            metrics[k] = np.concatenate([metrics[k], v], axis=1) if k in metrics else v
+        samples = _state_samples(state, num_runs)
+        _save_npz(out / METRICS_FILE, metrics | samples)  # before the checkpoint (see resume)
+        mngr.save(c + 1, args=ocp.args.StandardSave(_keys_to_data(state)))
+        mngr.wait_until_finished()
+        chunks_this_call += 1
+        steps_done = (c + 1) * chunk * cfg.eval_every
+        rate = chunks_this_call * chunk * cfg.eval_every * num_runs / max(train_seconds, 1e-9)
+        eta = (num_chunks - c - 1) * train_seconds / chunks_this_call
+        latest = np.nanmean(m.eval_return[:, -1])
+        log(
+            f"[{c + 1}/{num_chunks}] env steps {steps_done:,}/{cfg.total_env_steps:,} per run | "
+            f"{rate:,.0f} env steps/s (all runs) | ETA {eta / 60:.1f} min | "
+            f"eval return {latest:.1f} (mean of runs)"
+        )
+        if stop_after_chunks is not None and chunks_this_call >= stop_after_chunks:
+            break
+    complete = metrics and metrics["eval_return"].shape[1] == cfg.num_evals
+    timing = {
+        "wall_seconds": time.time() - t0,
+        "train_seconds": train_seconds,
+        "compile_seconds": compile_seconds,
+        "env_steps_per_second": (
+            chunks_this_call * chunk * cfg.eval_every * num_runs / train_seconds
+            if train_seconds
+            else float("nan")
+        ),
+        "num_runs": num_runs,
+        "devices": len(devices),
+    }
+    if complete:
+        (out / "timing.json").write_text(json.dumps(timing, indent=2) + "\n")
+        _write_results(out, plots, log)
+    return {"metrics": metrics, "complete": bool(complete), "state": state, "timing": timing}
+
+
+def _expert_for(cfg: Config):  # noqa: ANN202
+    from arld_jax.envs import make_env, toy_target_action
+    from arld_jax.expert import Expert, load_expert
+
+    if cfg.env_name == "toy" and cfg.expert_path is None:
+        # The toy env's optimal policy is known in closed form: it is the toy expert.
+        return Expert(params={}, act=lambda p, obs, k: toy_target_action(obs), meta={"name": "toy"})
+    if cfg.expert_path is None:
+        raise SystemExit(
+            "error: a query strategy other than 'none' needs an expert: set --expert_path "
+            f"(the shipped HalfCheetah expert is {SHIPPED_EXPERT})"
+        )
+    env = make_env(cfg)
+    try:
+        return load_expert(cfg.expert_path, env.obs_dim, env.action_dim, cfg.expert_stochastic)
+    except (FileNotFoundError, ValueError) as err:
+        raise SystemExit(f"error: {err}") from None
+
+
+def _keys_to_data(tree):  # noqa: ANN001, ANN202
+    """Typed PRNG keys -> raw uint32 data (orbax stores plain arrays)."""
+    import jax
+
+    is_key = lambda x: hasattr(x, "dtype") and jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)  # noqa: E731
+    return jax.tree.map(lambda x: jax.random.key_data(x) if is_key(x) else x, tree)
+
+
+def _data_to_keys(tree, like):  # noqa: ANN001, ANN202
+    import jax
+
+    is_key = lambda x: hasattr(x, "dtype") and jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)  # noqa: E731
+    return jax.tree.map(lambda d, x: jax.random.wrap_key_data(d) if is_key(x) else d, tree, like)
+
+
+def _state_samples(state, num_runs: int) -> dict[str, np.ndarray]:  # noqa: ANN001
+    out = {}
+    for name in ("visited", "queried"):
+        s = getattr(state, name)
+        out[f"{name}_obs"] = np.asarray(s.obs)[:num_runs]
+        out[f"{name}_env_step"] = np.asarray(s.env_step)[:num_runs]
+        out[f"{name}_valid"] = np.asarray(s.key)[:num_runs] >= 0
+    return out
+
+
+def _write_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
+    from arld_jax import results
+
+    csv_path, md_path = results.write_summary(out)
+    log(md_path.read_text())
+    if plots:
+        from arld_jax import plots as plots_mod
+
+        for p in plots_mod.plot_all(out):
+            log(f"figure: {p}")
+
+
+# ---------------------------------------------------------------- commands
+
+
+def train_expert(args: argparse.Namespace, sweep: Sweep, argv: list[str]) -> Path:
+    """Train plain SAC over seeds; save the best seed's actor as the expert."""
+    from arld_jax.envs import make_env
+    from arld_jax.expert import save_expert
+
+    if sweep.sweep:
+        raise SystemExit("error: train_expert takes no swept fields (only --seeds)")
+    sweep = dataclasses.replace(sweep, cfg=sweep.cfg.replace(strategy="none"))
+    out = Path(args.out) if args.out else SHIPPED_EXPERT
+    run_dir = out / "training"
+    result = run_sweep(
+        sweep,
+        run_dir,
+        args.chunk_periods,
+        args.stop_after_chunks,
+        command="python -m arld_jax.run " + " ".join(argv),
+        preset=args.preset,
+        plots=not args.no_plots,
+    )
+    if not result["complete"]:
+        print(f"stopped early; rerun the same command to resume ({run_dir})")
+        return run_dir
+    import jax
+
+    final = result["metrics"]["eval_return"][:, -1]
+    best = int(np.argmax(final))
+    actor = jax.tree.map(lambda x: np.asarray(x[best]), result["state"].agent.actor_params)
+    env = make_env(sweep.cfg)
+    cfg = sweep.cfg
+    meta = {
+        "env_name": cfg.env_name,
+        "backend": cfg.backend,
+        "obs_dim": env.obs_dim,
+        "action_dim": env.action_dim,
+        "hidden_sizes": list(cfg.hidden_sizes),
+        "log_std_min": cfg.log_std_min,
+        "log_std_max": cfg.log_std_max,
+        "seed": sweep.seeds[best],
+        "train_env_steps": cfg.total_env_steps,
+        "eval_return": float(final[best]),
+        "eval_episodes": cfg.num_eval_episodes,
+        "final_eval_return_all_seeds": {str(s): float(r) for s, r in zip(sweep.seeds, final)},
+        "command": "python -m arld_jax.run " + " ".join(argv),
+    }
+    path = save_expert(out, actor, meta)
+    print(f"expert (seed {meta['seed']}, eval return {meta['eval_return']:.1f}) saved to {path}")
+    return path
+
+
+def main(argv: list[str] | None = None) -> None:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args, sweep = parse_args(argv)
+    if args.command == "plot":
+        run_dir = Path(args.run_dir)
+        if not (run_dir / "config.json").exists():
+            raise SystemExit(f"error: {run_dir} is not a run directory (no config.json)")
+        _write_results(run_dir, True, print)
+        return
+    _enable_compilation_cache()
+    if args.command == "train_expert":
+        train_expert(args, sweep, argv)
+        return
+    out = Path(args.out) if args.out else _default_out(args.command, args.preset)
+    print(f"output directory: {out}")
+    result = run_sweep(
+        sweep,
+        out,
+        args.chunk_periods,
+        args.stop_after_chunks,
+        command="python -m arld_jax.run " + " ".join(argv),
+        preset=args.preset,
+        plots=not args.no_plots,
+    )
+    if not result["complete"]:
+        print(f"stopped before the end; rerun the same command to resume: {out}")
+    print(f"results in {out}")
+
+
+def _enable_compilation_cache() -> None:
+    """Persistent XLA compilation cache: a second run of the same program skips the compile."""
+    import jax
+
+    cache = os.environ.get("ARLD_JAX_CACHE", str(REPO_ROOT / ".jax_cache"))
+    jax.config.update("jax_compilation_cache_dir", cache)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+
+
+if __name__ == "__main__":
+    main()

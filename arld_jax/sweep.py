@@ -1,0 +1,174 @@
+"""Sweeps: a base Config, lists of values for sweepable fields, and seeds -> one batch of runs.
+
+Runs are the cartesian product of the swept values (cells, in the order the fields were given) times
+the seeds (cell-major). They become ONE `HParams` pytree with a leading run axis, so a single compiled
+program trains all of them with `vmap` (and shards the run axis over devices when there are several).
+Each run's values are validated by building its own `Config`, so a bad value in a list fails before
+anything compiles, naming the field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from arld_jax.config import SWEEPABLE, Config, HParams, hparams_from_config
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+SHIPPED_EXPERT = REPO_ROOT / "experiments" / "expert"
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """A base config, the swept fields (field -> list of values) and the seeds."""
+
+    cfg: Config
+    sweep: dict[str, tuple[Any, ...]] = field(default_factory=dict)
+    seeds: tuple[int, ...] = (0,)
+
+    def __post_init__(self) -> None:
+        for name, values in self.sweep.items():
+            if name not in SWEEPABLE:
+                raise ValueError(
+                    f"Field {name!r} cannot be swept in one compiled program (it sets shapes or "
+                    f"program structure); sweepable fields: {', '.join(SWEEPABLE)}."
+                )
+            if name == "seed":
+                raise ValueError("Sweep seeds with `seeds`, not as a swept field.")
+            if len(values) == 0:
+                raise ValueError(f"Swept field {name!r} has no values.")
+        if not self.seeds:
+            raise ValueError("seeds is empty: give at least one seed.")
+        if len(set(self.seeds)) != len(self.seeds):
+            raise ValueError(f"seeds {self.seeds} has duplicates.")
+        self.run_configs()  # validate every run's values now
+
+    def cells(self) -> list[dict[str, Any]]:
+        """Every combination of the swept values, in order."""
+        names = list(self.sweep)
+        return [
+            dict(zip(names, combo, strict=True))
+            for combo in itertools.product(*self.sweep.values())
+        ]
+
+    def run_configs(self) -> list[Config]:
+        """One validated Config per run (cells x seeds, cell-major)."""
+        return [self.cfg.replace(**cell, seed=seed) for cell in self.cells() for seed in self.seeds]
+
+    def runs(self) -> list[dict[str, Any]]:
+        """The per-run records written to runs.json."""
+        records = []
+        for i, run_cfg in enumerate(self.run_configs()):
+            cell_index, _ = divmod(i, len(self.seeds))
+            cell = self.cells()[cell_index]
+            record = {"run": i, "cell": cell_index, "seed": run_cfg.seed}
+            record["cell_label"] = " ".join(f"{k}={v}" for k, v in cell.items()) or "base"
+            record.update({name: getattr(run_cfg, name) for name in SWEEPABLE if name != "seed"})
+            records.append(record)
+        return records
+
+    @property
+    def num_runs(self) -> int:
+        return len(self.cells()) * len(self.seeds)
+
+    def needs_expert(self) -> bool:
+        return any(c.strategy != "none" for c in self.run_configs())
+
+    def hparams_and_keys(self) -> tuple[HParams, jax.Array]:
+        """Stacked HParams [num_runs] and PRNG keys [num_runs] (key = jax.random.key(seed), so a run
+        in a sweep equals a single run with the same seed)."""
+        configs = self.run_configs()
+        hps = jax.tree.map(lambda *xs: jnp.stack(xs), *[hparams_from_config(c) for c in configs])
+        keys = jnp.stack([jax.random.key(c.seed) for c in configs])
+        return hps, keys
+
+    def to_json(self) -> dict[str, Any]:
+        """What identifies the sweep (compared on resume)."""
+        cfg = dataclasses.asdict(self.cfg)
+        cfg["hidden_sizes"] = list(cfg["hidden_sizes"])
+        return {
+            "config": cfg,
+            "sweep": {k: list(v) for k, v in self.sweep.items()},
+            "seeds": list(self.seeds),
+        }
+
+
+# ---------------------------------------------------------------- named sweep presets
+
+
+def _arld_cells(**extra: tuple[Any, ...]) -> dict[str, tuple[Any, ...]]:
+    cells: dict[str, tuple[Any, ...]] = {
+        "strategy": ("none", "greedy", "bernoulli", "active"),
+        "uncertainty": ("intrinsic", "extrinsic"),
+    }
+    cells.update(extra)
+    return cells
+
+
+def preset_default() -> Sweep:
+    """~10 min on a 2-core CPU: all 4 strategies x both uncertainty measures, 2 seeds, 10k env steps
+    of MJX HalfCheetah with budget 1,000 and N_r 1,000 (a scaled-down paper protocol)."""
+    cfg = Config(
+        total_env_steps=10_000,
+        learning_starts=1_000,
+        eval_every=1_000,
+        num_eval_episodes=2,
+        replay_capacity=10_000,
+        budget=1_000,
+        window_size=1_000,
+        query_prob=0.1,
+        t_query=0.1,
+        demo_steps=5,
+        expert_path=str(SHIPPED_EXPERT),
+    )
+    return Sweep(cfg=cfg, sweep=_arld_cells(), seeds=(0, 1))
+
+
+def preset_sac() -> Sweep:
+    """Plain SAC on MJX HalfCheetah, 3 seeds, 100k env steps (issue: SAC learns on CPU)."""
+    cfg = Config(total_env_steps=100_000, replay_capacity=100_000, eval_every=5_000)
+    return Sweep(cfg=cfg, seeds=(0, 1, 2))
+
+
+def preset_paper() -> Sweep:
+    """The paper's protocol (appendix A.1) for a GPU: 400k steps, 10 seeds, budget 10k, N_r 5k,
+    t_query in {0.05, 0.1, 0.2, ..., 0.7}, b grid, C in {1, 2, 3, 5, 10}. 4 strategies x 2
+    uncertainties x 8 t_query x 5 b x 5 C cells would be wasteful (b only matters for bernoulli,
+    t_query only for active), so this preset sweeps the paper's figures' axes with C = 1 and is
+    meant to be narrowed with overrides, e.g. `--strategy active --t_query 0.05,0.1,0.2`."""
+    cfg = Config(
+        total_env_steps=400_000,
+        replay_capacity=400_000,
+        eval_every=5_000,
+        num_eval_episodes=10,
+        budget=10_000,
+        window_size=5_000,
+        expert_path=str(SHIPPED_EXPERT),
+    )
+    sweep = _arld_cells(
+        t_query=(0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7),
+        query_prob=(0.1, 0.2, 0.3, 0.4, 0.5),
+        demo_steps=(1, 2, 3, 5, 10),
+    )
+    return Sweep(cfg=cfg, sweep=sweep, seeds=tuple(range(10)))
+
+
+def preset_tiny() -> Sweep:
+    """Seconds on the toy env (tests, smoke runs). Strategies that query use the toy expert."""
+    from arld_jax.config import tiny
+
+    return Sweep(cfg=tiny(), seeds=(0, 1))
+
+
+SWEEP_PRESETS = {
+    "default": preset_default,
+    "sac": preset_sac,
+    "paper": preset_paper,
+    "tiny": preset_tiny,
+}

@@ -1,0 +1,341 @@
+"""The one scanned training loop: `trainer = make_train(cfg, expert)`.
+
+Shape of a run (STYLE.md habit 6):
+
+    train(key, hp) = run_periods(init(key, hp), hp, first_period=0, num_periods=cfg.num_evals)
+
+* a *period* is `eval_every` env steps followed by one evaluation of the deterministic policy;
+* an *iteration* steps every env once: act (the agent, or the expert where the query mask is set),
+  env step, replay add, `updates_per_iter` gradient steps (after warm-up).
+
+Everything is pure and jit/vmap-friendly: seeds and sweeps are `jax.vmap(train)` over keys and
+`HParams`. The iteration and period indices come in as scan inputs that are NOT batched under vmap, so
+the `lax.cond`s that skip updates during warm-up and reset envs at episode ends stay real branches
+(not selects that would run both sides) when vmapped over seeds. The resumable driver (`run.py`) calls
+`run_periods` chunk by chunk with the same compiled program.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import chex
+import flax.struct
+import jax
+import jax.numpy as jnp
+
+from arld_jax import query
+from arld_jax.agent import (
+    AgentState,
+    UpdateMetrics,
+    act,
+    act_deterministic,
+    make_agent,
+    uncertainty,
+)
+from arld_jax.config import Config, HParams
+from arld_jax.envs import EnvState, make_env
+from arld_jax.evaluate import evaluate_policy
+from arld_jax.expert import Expert
+from arld_jax.replay import ReplayState, make_prioritized_replay, priority_from_td
+from arld_jax.types import Params, PRNGKey, Transition
+
+
+@flax.struct.dataclass
+class StateSample:
+    """A uniform sample without replacement of a stream of states, kept on device (Fig. 8).
+
+    Algorithm A-Res (Efraimidis & Spirakis 2006) with equal weights: every item draws a random key in
+    [0, 1) and the sample keeps the items with the largest keys. Slots with key < 0 are empty."""
+
+    obs: jax.Array  # [K, obs_dim]
+    env_step: jax.Array  # [K] i32, when the state was seen
+    key: jax.Array  # [K] f32
+
+
+def init_state_sample(size: int, obs_dim: int) -> StateSample:
+    return StateSample(
+        obs=jnp.zeros((size, obs_dim)),
+        env_step=jnp.zeros((size,), jnp.int32),
+        key=jnp.full((size,), -1.0),
+    )
+
+
+def add_to_state_sample(
+    sample: StateSample, rng: PRNGKey, obs: jax.Array, mask: jax.Array, env_step: jax.Array
+) -> StateSample:
+    """Offer the masked rows of `obs` [n, obs_dim] to the sample."""
+    n = obs.shape[0]
+    keys = jnp.where(mask, jax.random.uniform(rng, (n,)), -2.0)
+    all_keys = jnp.concatenate([sample.key, keys])
+    top, idx = jax.lax.top_k(all_keys, sample.key.shape[0])
+    all_obs = jnp.concatenate([sample.obs, obs])
+    all_steps = jnp.concatenate([sample.env_step, jnp.broadcast_to(env_step, (n,))])
+    return StateSample(obs=all_obs[idx], env_step=all_steps[idx], key=top)
+
+
+@flax.struct.dataclass
+class TrainState:
+    """Everything a run needs to continue: the complete state that checkpoints save."""
+
+    agent: AgentState
+    replay: ReplayState
+    env: EnvState
+    query: query.QueryState
+    expert_params: Params
+    episode_return: jax.Array  # [num_envs] running return of the current training episodes
+    visited: StateSample  # uniform sample of visited states
+    queried: StateSample  # uniform sample of states where a query started
+    key: PRNGKey
+
+
+@flax.struct.dataclass
+class IterationOutput:
+    """Per-iteration scalars, reduced to period metrics and down-sampled traces."""
+
+    uncertainty: jax.Array  # mean u(s) over envs
+    sigma: jax.Array  # mean sigma_theta(s) over envs and action dims
+    demos_used: jax.Array  # cumulative demonstrated steps
+    new_queries: jax.Array  # queries started at this iteration
+    finished_return: jax.Array  # mean return of episodes ending here (nan if none)
+    learning: jax.Array  # gradient updates ran at this iteration
+    update: UpdateMetrics  # mean over this iteration's updates (zeros in warm-up)
+
+
+@flax.struct.dataclass
+class PeriodMetrics:
+    """One row per evaluation period (leading axis [num_periods] after a scan)."""
+
+    env_steps: jax.Array  # env steps done at the end of the period
+    eval_return: jax.Array  # mean return of the deterministic policy tanh(mu)
+    train_return: jax.Array  # mean return of training episodes finished in the period (nan if none)
+    critic_loss: jax.Array
+    actor_loss: jax.Array
+    alpha: jax.Array
+    entropy: jax.Array
+    sigma: jax.Array  # mean sigma_theta(s) on visited states
+    uncertainty: jax.Array  # mean u(s) on visited states
+    demos_used: jax.Array  # cumulative demonstrated steps at the end of the period
+    queries: jax.Array  # queries started in the period
+    uncertainty_trace: jax.Array  # [traces_per_eval] mean u(s) (Fig. 3)
+    demos_trace: jax.Array  # [traces_per_eval] cumulative demonstrations (Fig. 9)
+
+
+class Trainer(NamedTuple):
+    """Pure functions of one run; vmap them over seeds and hyperparameters."""
+
+    init: Callable[[PRNGKey, HParams], TrainState]
+    run_periods: Callable[[TrainState, HParams, jax.Array, int], tuple[TrainState, PeriodMetrics]]
+    train: Callable[[PRNGKey, HParams], tuple[TrainState, PeriodMetrics]]
+    evaluate: Callable[[Params, PRNGKey], jax.Array]
+    cfg: Config
+    obs_dim: int
+    action_dim: int
+
+
+def _masked_mean(x: jax.Array, mask: jax.Array) -> jax.Array:
+    return jnp.sum(jnp.where(mask, x, 0.0)) / jnp.maximum(jnp.sum(mask), 1)
+
+
+def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
+    """Build the trainer of `cfg`. Without an expert, no query is ever made (strategy 'none')."""
+    env = make_env(cfg)
+    agent = make_agent(cfg, env.obs_dim, env.action_dim)
+    per = make_prioritized_replay(cfg.replay_capacity, cfg.batch_size, cfg.per_alpha)
+    num_envs, length = cfg.num_envs, cfg.episode_length
+    has_expert = expert is not None
+
+    def expert_act(params: Params, obs: jax.Array, key: PRNGKey) -> jax.Array:
+        if expert is None:
+            return jnp.zeros((obs.shape[0], env.action_dim))
+        return expert.act(params, obs, key)
+
+    def init(key: PRNGKey, hp: HParams) -> TrainState:
+        k_agent, k_env, k_run = jax.random.split(key, 3)
+        agent_state = agent.init(k_agent, hp)
+        example = Transition(
+            obs=jnp.zeros(env.obs_dim),
+            action=jnp.zeros(env.action_dim),
+            reward=jnp.zeros(()),
+            next_obs=jnp.zeros(env.obs_dim),
+            terminated=jnp.zeros(()),
+            is_demo=jnp.zeros(()),
+        )
+        return TrainState(
+            agent=agent_state,
+            replay=per.init(example),
+            env=env.reset(k_env, num_envs),
+            query=query.init_query_state(num_envs, cfg.window_size),
+            expert_params=expert.params if expert is not None else {},
+            episode_return=jnp.zeros(num_envs),
+            visited=init_state_sample(cfg.state_sample_size, env.obs_dim),
+            queried=init_state_sample(cfg.state_sample_size, env.obs_dim),
+            key=k_run,
+        )
+
+    def gradient_steps(
+        agent_state: AgentState,
+        replay: ReplayState,
+        key: PRNGKey,
+        hp: HParams,
+        it: jax.Array,
+        warm: jax.Array,
+    ) -> tuple[AgentState, ReplayState, UpdateMetrics]:
+        """`updates_per_iter` SAC updates from prioritized replay, priorities refreshed after each.
+
+        During warm-up the agent is not updated (only its TD errors are measured). The branch is a
+        `lax.cond` on the unbatched `warm`, and the replay buffer stays outside it: XLA may copy a
+        conditional's operands, and the buffer is the largest array of the run."""
+        # Importance-sampling exponent annealed linearly from beta0 to 1 (Schaul et al. 2015).
+        beta = cfg.per_beta0 + (1.0 - cfg.per_beta0) * it / cfg.num_iterations
+
+        def one_update(carry, k):  # noqa: ANN001, ANN202
+            agent_state, replay = carry
+            k_sample, k_update = jax.random.split(k)
+            batch, indices, weights = per.sample(replay, k_sample, beta)
+            agent_state, td, metrics = jax.lax.cond(
+                warm, agent.no_update, agent.update, agent_state, batch, weights, hp, k_update
+            )
+            # Paper A.1 (DDPGfD): p = delta^2 + eps + eps_d for demonstrations.
+            priorities = priority_from_td(td, batch.is_demo, cfg.per_eps, hp.eps_demo)
+            return (agent_state, per.set_priorities(replay, indices, priorities)), metrics
+
+        keys = jax.random.split(key, cfg.updates_per_iter)
+        (agent_state, replay), metrics = jax.lax.scan(one_update, (agent_state, replay), keys)
+        return agent_state, replay, jax.tree.map(jnp.mean, metrics)
+
+    def iteration(
+        state: TrainState, it: jax.Array, hp: HParams
+    ) -> tuple[TrainState, IterationOutput]:
+        """One env step of every env, then the gradient updates. `it` is the (unbatched) index."""
+        key, k_act, k_rand, k_query, k_expert, k_update, k_reset, k_vis, k_qry = jax.random.split(
+            state.key, 9
+        )
+        obs = state.env.obs  # [num_envs, obs_dim]
+        warm = it < cfg.warmup_iters
+        agent_action, policy = act(agent, state.agent.actor_params, obs, k_act, hp.noisy)
+        random_action = jax.random.uniform(k_rand, agent_action.shape, minval=-1.0, maxval=1.0)
+        agent_action = jnp.where(warm, random_action, agent_action)
+
+        # Query: per-env mask; the expert's action replaces the agent's where it is set.
+        u = uncertainty(policy, hp.noisy, cfg.uncertainty_reduce)  # [num_envs]
+        t = it % length
+        allow = has_expert & (cfg.query_during_warmup | ~warm)
+        qstate, is_demo, new_query = query.query_step(
+            state.query, k_query, u, length - t, hp, allow, cfg.window_records
+        )
+        expert_action = expert_act(state.expert_params, obs, k_expert)
+        action = jnp.where(is_demo[:, None], expert_action, agent_action)
+        chex.assert_shape(action, (num_envs, env.action_dim))
+
+        next_env = env.step(state.env, action)
+        transition = Transition(
+            obs=obs,
+            action=action,  # the executed action (the expert's on demonstrated steps)
+            reward=next_env.reward,
+            next_obs=next_env.obs,  # true next obs, also at the time limit
+            terminated=next_env.terminated,
+            is_demo=is_demo.astype(jnp.float32),
+        )
+        replay = per.add(state.replay, transition)
+
+        # Episode end (a time limit, not a termination): all envs end together; fresh initial states.
+        episode_return = state.episode_return + next_env.reward
+        episode_end = t == length - 1
+        finished_return = jnp.where(episode_end, jnp.mean(episode_return), jnp.nan)
+        next_env = jax.lax.cond(episode_end, lambda: env.reset(k_reset, num_envs), lambda: next_env)
+        episode_return = jnp.where(episode_end, 0.0, episode_return)
+
+        agent_state, replay, update_metrics = gradient_steps(
+            state.agent, replay, k_update, hp, it, warm
+        )
+        env_step = (it + 1) * num_envs
+        all_envs = jnp.ones(num_envs, bool)
+        new_state = TrainState(
+            agent=agent_state,
+            replay=replay,
+            env=next_env,
+            query=qstate,
+            expert_params=state.expert_params,
+            episode_return=episode_return,
+            visited=add_to_state_sample(state.visited, k_vis, obs, all_envs, env_step),
+            queried=add_to_state_sample(state.queried, k_qry, obs, new_query, env_step),
+            key=key,
+        )
+        out = IterationOutput(
+            uncertainty=jnp.mean(u),
+            sigma=jnp.mean(jnp.exp(policy.log_std)),
+            demos_used=qstate.demos_used,
+            new_queries=jnp.sum(new_query).astype(jnp.int32),
+            finished_return=finished_return,
+            learning=~warm,
+            update=update_metrics,
+        )
+        return new_state, out
+
+    def evaluate(actor_params: Params, key: PRNGKey) -> jax.Array:
+        """Mean return of the deterministic policy tanh(mu(s))."""
+        policy_fn = lambda obs: act_deterministic(agent, actor_params, obs)  # noqa: E731
+        return evaluate_policy(env, policy_fn, key, cfg.num_eval_episodes, length)
+
+    def period(state: TrainState, p: jax.Array, hp: HParams) -> tuple[TrainState, PeriodMetrics]:
+        """`iters_per_eval` iterations, then one evaluation."""
+        its = p * cfg.iters_per_eval + jnp.arange(cfg.iters_per_eval)
+        state, out = jax.lax.scan(lambda s, i: iteration(s, i, hp), state, its)
+        key, k_eval = jax.random.split(state.key)
+        state = state.replace(key=key)
+        traces = cfg.traces_per_eval
+        learning = out.learning
+        finished = ~jnp.isnan(out.finished_return)
+        metrics = PeriodMetrics(
+            env_steps=(p + 1) * cfg.eval_every,
+            eval_return=evaluate(state.agent.actor_params, k_eval),
+            train_return=jnp.where(
+                jnp.any(finished), _masked_mean(out.finished_return, finished), jnp.nan
+            ),
+            critic_loss=_masked_mean(out.update.critic_loss, learning),
+            actor_loss=_masked_mean(out.update.actor_loss, learning),
+            alpha=out.update.alpha[-1],
+            entropy=_masked_mean(out.update.entropy, learning),
+            sigma=jnp.mean(out.sigma),
+            uncertainty=jnp.mean(out.uncertainty),
+            demos_used=out.demos_used[-1],
+            queries=jnp.sum(out.new_queries),
+            uncertainty_trace=jnp.mean(out.uncertainty.reshape(traces, -1), axis=1),
+            demos_trace=out.demos_used.reshape(traces, -1)[:, -1],
+        )
+        return state, metrics
+
+    def run_periods(
+        state: TrainState, hp: HParams, first_period: jax.Array, num_periods: int
+    ) -> tuple[TrainState, PeriodMetrics]:
+        """Periods first_period .. first_period + num_periods - 1 (num_periods is static).
+
+        Under vmap, pass `first_period` unbatched (in_axes=None)."""
+        periods = first_period + jnp.arange(num_periods)
+        return jax.lax.scan(lambda s, p: period(s, p, hp), state, periods)
+
+    def train(key: PRNGKey, hp: HParams) -> tuple[TrainState, PeriodMetrics]:
+        """A whole run: init, then every period in one scan."""
+        _check_expert(hp)
+        return run_periods(init(key, hp), hp, jnp.int32(0), cfg.num_evals)
+
+    def _check_expert(hp: HParams) -> None:
+        if has_expert or isinstance(hp.strategy, jax.core.Tracer):
+            return
+        if bool(jnp.any(hp.strategy != query.NONE)):
+            raise ValueError(
+                "A query strategy other than 'none' needs an expert: pass expert=load_expert(...) "
+                "to make_train (or set expert_path)."
+            )
+
+    return Trainer(
+        init=init,
+        run_periods=run_periods,
+        train=train,
+        evaluate=evaluate,
+        cfg=cfg,
+        obs_dim=env.obs_dim,
+        action_dim=env.action_dim,
+    )

@@ -1,0 +1,141 @@
+"""Tests for arld_jax.networks (noisy mean head, log-std clip, twin critics), agent.uncertainty."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy import stats
+
+from arld_jax import agent as agent_lib
+from arld_jax import networks
+
+OBS_DIM, ACTION_DIM, HIDDEN = 4, 3, (8, 8)
+NUM_SAMPLES = 20_000
+
+
+def _phi(params: dict, obs: np.ndarray) -> np.ndarray:
+    """The mean head's input phi(s), recomputed from the MLP parameters in float64."""
+    x = np.asarray(obs, np.float64)
+    mlp = params["params"]["MLP_0"]
+    for i in range(len(HIDDEN)):
+        layer = mlp[f"Dense_{i}"]
+        x = np.maximum(x @ np.asarray(layer["kernel"], np.float64) + np.asarray(layer["bias"]), 0.0)
+    return x
+
+
+@pytest.fixture(scope="module")
+def noisy_actor() -> tuple[networks.Actor, dict, np.ndarray]:
+    """An actor whose noisy head has non-trivial, unequal sigma_w and sigma_b (~0.3)."""
+    actor = networks.Actor(action_dim=ACTION_DIM, hidden_sizes=HIDDEN)
+    obs = np.array([[0.8, -1.1, 0.5, 1.3]], np.float32)
+    params = jax.jit(actor.init)(jax.random.key(0), obs, jax.random.key(1), jnp.float32(0.0))
+    rng = np.random.default_rng(0)
+    head = dict(params["params"]["mean_head"])
+    head["sigma_w"] = jnp.asarray(0.3 * rng.uniform(0.5, 1.5, head["sigma_w"].shape), jnp.float32)
+    head["sigma_b"] = jnp.asarray(0.3 * rng.uniform(0.5, 1.5, head["sigma_b"].shape), jnp.float32)
+    params = {"params": {**params["params"], "mean_head": head}}
+    assert np.count_nonzero(_phi(params, obs)) >= 2  # some hidden units are active
+    return actor, params, obs
+
+
+def test_noisy_mean_variance_matches_monte_carlo(noisy_actor) -> None:  # noqa: ANN001
+    """Paper 3.1: Var[mu~] = phi^T diag(sigma_w^2) phi + sigma_b^2, checked per action dimension
+    against the sample variance of 20,000 independently perturbed means (chi-square test)."""
+    actor, params, obs = noisy_actor
+    keys = jax.random.split(jax.random.key(123), NUM_SAMPLES)
+    out = jax.jit(jax.vmap(lambda k: actor.apply(params, obs, k, jnp.float32(1.0))))(keys)
+    samples = np.asarray(out.mean, np.float64)[:, 0, :]  # [N, A]
+    mean_var = np.asarray(out.mean_var)[0, 0]  # identical for every key
+    np.testing.assert_array_equal(
+        np.asarray(out.mean_var), np.broadcast_to(out.mean_var[0], out.mean_var.shape)
+    )
+
+    # The analytic variance itself, recomputed by hand.
+    head = params["params"]["mean_head"]
+    phi = _phi(params, obs)[0]
+    sw, sb = np.asarray(head["sigma_w"], np.float64), np.asarray(head["sigma_b"], np.float64)
+    np.testing.assert_allclose(mean_var, phi**2 @ sw**2 + sb**2, rtol=1e-5)
+
+    n = NUM_SAMPLES
+    sample_var = samples.var(axis=0, ddof=1)
+    for j in range(ACTION_DIM):
+        chi2 = (n - 1) * sample_var[j] / mean_var[j]
+        p = 2 * min(stats.chi2.cdf(chi2, n - 1), stats.chi2.sf(chi2, n - 1))
+        assert p > 1e-4, (j, sample_var[j], mean_var[j], p)
+    # Relative error of a variance estimate is sqrt(2/(n-1)) = 1%: 5% is 5 sd.
+    np.testing.assert_allclose(sample_var, mean_var, rtol=0.05)
+    # And the perturbed mean is centred on the noise-free one.
+    mu = phi @ np.asarray(head["mu_w"], np.float64) + np.asarray(head["mu_b"], np.float64)
+    np.testing.assert_array_less(np.abs(samples.mean(axis=0) - mu), 5 * np.sqrt(mean_var / n))
+
+
+def test_noise_scale_zero_is_the_plain_linear_head(noisy_actor) -> None:  # noqa: ANN001
+    actor, params, obs = noisy_actor
+    apply = jax.jit(actor.apply)
+    out1 = apply(params, obs, jax.random.key(1), jnp.float32(0.0))
+    out2 = apply(params, obs, jax.random.key(2), jnp.float32(0.0))
+    np.testing.assert_array_equal(out1.mean, out2.mean)  # no noise at all
+    head = params["params"]["mean_head"]
+    expected = _phi(params, obs) @ np.asarray(head["mu_w"], np.float64) + np.asarray(head["mu_b"])
+    np.testing.assert_allclose(out1.mean, expected, rtol=1e-5, atol=1e-6)
+    # ... while noise_scale = 1 does perturb it (sigma ~ 0.3), so the comparison above can fail.
+    out3 = apply(params, obs, jax.random.key(1), jnp.float32(1.0))
+    assert np.max(np.abs(np.asarray(out3.mean) - np.asarray(out1.mean))) > 1e-3
+
+
+def test_log_std_is_clipped() -> None:
+    actor = networks.Actor(action_dim=3, hidden_sizes=(4,), log_std_min=-5.0, log_std_max=1.5)
+    obs = jnp.ones((2, 2))
+    params = jax.jit(actor.init)(jax.random.key(0), obs, jax.random.key(1), jnp.float32(0.0))
+    # log_std = phi @ 0 + bias: one above the max, one below the min, one inside.
+    head = {"kernel": jnp.zeros((4, 3)), "bias": jnp.array([7.0, -30.0, 0.25])}
+    params = {"params": {**params["params"], "log_std_head": head}}
+    out = jax.jit(actor.apply)(params, obs, jax.random.key(2), jnp.float32(0.0))
+    np.testing.assert_allclose(out.log_std, [[1.5, -5.0, 0.25]] * 2)
+
+
+def test_twin_critic_has_two_independent_critics() -> None:
+    obs_dim, action_dim, hidden = 3, 2, (8,)
+    rng = np.random.default_rng(0)
+    obs = jnp.asarray(rng.normal(size=(5, obs_dim)), jnp.float32)
+    action = jnp.asarray(rng.uniform(-1, 1, size=(5, action_dim)), jnp.float32)
+    critic = networks.TwinCritic(hidden_sizes=hidden)
+    params = jax.jit(critic.init)(jax.random.key(0), obs, action)
+    q = jax.jit(critic.apply)(params, obs, action)
+    assert q.shape == (5, networks.NUM_CRITICS) == (5, 2)
+    assert np.all(np.abs(np.asarray(q[:, 0] - q[:, 1])) > 1e-6)  # different initialisations
+
+    # Critic k is exactly a QNetwork with the k-th slice of the stacked parameters.
+    single_apply = jax.jit(networks.QNetwork(hidden_sizes=hidden).apply)
+    for k in range(2):
+        params_k = jax.tree.map(lambda p, k=k: p[k], params["params"]["VmapQNetwork_0"])
+        np.testing.assert_allclose(
+            q[:, k], single_apply({"params": params_k}, obs, action), rtol=1e-5, atol=1e-6
+        )
+
+
+# ---------------------------------------------------------------- agent.uncertainty
+
+# exp(log_std) = [1, 2, 4]:     mean 7/3, max 4,   sum 7
+# mean_var = [0.1, 0.5, 0.3]:   mean 0.3, max 0.5, sum 0.9
+_POLICY = networks.PolicyOutput(
+    mean=jnp.zeros((1, 3)),
+    log_std=jnp.log(jnp.array([[1.0, 2.0, 4.0]])),
+    mean_var=jnp.array([[0.1, 0.5, 0.3]]),
+)
+_EXPECTED = {"mean": (7 / 3, 0.3), "max": (4.0, 0.5), "sum": (7.0, 0.9)}
+
+
+@pytest.mark.parametrize("how", ["mean", "max", "sum"])
+def test_uncertainty_picks_sigma_or_mean_variance(how: str) -> None:
+    intrinsic, extrinsic = _EXPECTED[how]
+    u0 = agent_lib.uncertainty(_POLICY, jnp.float32(0.0), how)
+    u1 = agent_lib.uncertainty(_POLICY, jnp.float32(1.0), how)
+    assert u0.shape == u1.shape == (1,)
+    np.testing.assert_allclose(u0, [intrinsic], rtol=1e-6)
+    np.testing.assert_allclose(u1, [extrinsic], rtol=1e-6)
+    # `noisy` is a traced, sweepable value: the same choice under jit.
+    jitted = jax.jit(lambda noisy: agent_lib.uncertainty(_POLICY, noisy, how))
+    np.testing.assert_allclose(jitted(jnp.float32(1.0)), [extrinsic], rtol=1e-6)

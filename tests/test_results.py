@@ -1,0 +1,364 @@
+"""Tests for arld_jax.results (summary table) and arld_jax.plots (figures) on synthetic run dirs.
+
+No JAX here: the run directories are written by hand in the format of arld_jax.run, with numbers
+chosen so that every summary value can be worked out on paper.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from matplotlib.image import imread
+from scipy import stats
+
+from arld_jax import plots, results
+
+EVAL_EVERY = 1000
+PERIODS = 4
+TRACES = 5  # traces_per_eval
+OBS_DIM = 4
+K = 16  # state samples per run
+BUDGET = 100
+SEEDS = (0, 1, 2)
+DEMO_RATE = {0: 4, 1: 6, 2: 8}
+"""Demonstrations per trace slice of a querying run, by seed: cumulative demos at trace point i
+(0-based, over the whole run) are min(BUDGET, (i + 1) * rate). Seed 0 never reaches the budget
+(80 at the end), seed 1 reaches it at point 16 (6 * 17 = 102), seed 2 at point 12 (8 * 13 = 104)."""
+
+BASE_FIELDS: dict[str, Any] = {
+    "strategy": "none",
+    "uncertainty": "intrinsic",
+    "query_prob": 0.2,
+    "t_query": 0.1,
+    "demo_steps": 1,
+    "budget": BUDGET,
+    "eps_demo": 1.0,
+    "actor_lr": 3e-4,
+    "critic_lr": 3e-4,
+    "alpha_lr": 3e-4,
+    "gamma": 0.99,
+    "tau": 0.005,
+    "reward_scale": 1.0,
+    "init_alpha": 0.2,
+}
+
+
+def write_run_dir(
+    path: Path,
+    cells: list[dict[str, Any]],
+    sweep: dict[str, list[Any]],
+    periods: int = PERIODS,
+    total_periods: int = PERIODS,
+    expert: float | None = 3000.0,
+) -> Path:
+    """Write a run directory in run.py's format: len(cells) cells x 3 seeds, ``periods`` of
+    ``total_periods`` evaluation periods present (fewer = a partial sweep).
+
+    eval_return[run, p] = 100 * (cell + 1) * (p + 1) + 10 * seed; querying cells spend demos at
+    DEMO_RATE[seed] per trace slice up to BUDGET; 'none' cells never query.
+    """
+    path.mkdir(parents=True, exist_ok=True)
+    config = {
+        **BASE_FIELDS,
+        "env_name": "toy",
+        "num_envs": 1,
+        "total_env_steps": total_periods * EVAL_EVERY,
+        "eval_every": EVAL_EVERY,
+        "episode_length": 100,
+        "window_size": 50,
+        "traces_per_eval": TRACES,
+        "state_sample_size": K,
+        "seed": 0,
+    }
+    (path / "config.json").write_text(
+        json.dumps(
+            {
+                "config": config,
+                "sweep": sweep,
+                "seeds": list(SEEDS),
+                "preset": "default",
+                "command": "python -m arld_jax.run --synthetic",
+                "expert": None if expert is None else {"eval_return": expert},
+            }
+        )
+    )
+    runs = []
+    for c, overrides in enumerate(cells):
+        fields = {**BASE_FIELDS, **overrides}
+        label = " ".join(f"{k}={fields[k]}" for k in sweep)
+        for s in SEEDS:
+            runs.append({"run": len(runs), "cell": c, "cell_label": label, "seed": s, **fields})
+    (path / "runs.json").write_text(json.dumps(runs))
+
+    rng = np.random.default_rng(0)
+    n, p_, t = len(runs), periods, TRACES
+    p_idx = np.arange(p_)
+    point = (p_idx[:, None] * t + np.arange(t)[None, :]).astype(np.float64)  # [P, T] trace index
+    m: dict[str, np.ndarray] = {
+        "env_steps": np.tile((p_idx + 1) * EVAL_EVERY, (n, 1)).astype(np.int64),
+        "eval_return": np.zeros((n, p_)),
+        "train_return": np.full((n, p_), np.nan),
+        "demos_trace": np.zeros((n, p_, t), np.int64),
+        "uncertainty_trace": np.zeros((n, p_, t)),
+        "visited_obs": rng.normal(size=(n, K, OBS_DIM)) * np.array([3.0, 1.0, 0.3, 0.1]),
+        "visited_valid": np.ones((n, K), bool),
+        "queried_obs": rng.normal(size=(n, K, OBS_DIM)) + 2.0,
+        "queried_valid": np.zeros((n, K), bool),
+        "visited_env_step": np.tile(np.arange(K) * 100, (n, 1)),
+        "queried_env_step": np.tile(np.arange(K) * 100, (n, 1)),
+    }
+    for name in ("critic_loss", "actor_loss", "entropy", "sigma", "uncertainty", "queries"):
+        m[name] = rng.random((n, p_))
+    m["alpha"] = np.full((n, p_), 0.2)
+    for r, entry in enumerate(runs):
+        c, s = entry["cell"], entry["seed"]
+        m["eval_return"][r] = 100.0 * (c + 1) * (p_idx + 1) + 10.0 * s
+        m["uncertainty_trace"][r] = np.exp(-point / 10.0) + 0.05 * s + 0.02 * rng.random((p_, t))
+        if entry["strategy"] != "none":
+            m["demos_trace"][r] = np.minimum(BUDGET, (point + 1) * DEMO_RATE[s])
+            m["queried_valid"][r, :6] = True
+    m["demos_used"] = m["demos_trace"][:, :, -1].copy()
+    np.savez(path / "metrics.npz", **m)
+    (path / "timing.json").write_text(
+        json.dumps({"wall_seconds": 12.0, "env_steps_per_second": 1500.0, "compile_seconds": 3.0})
+    )
+    return path
+
+
+NONE_AND_BERNOULLI = [{"strategy": "none"}, {"strategy": "bernoulli"}]
+
+
+@pytest.fixture
+def run_dir(tmp_path: Path) -> Path:
+    """2 cells (SAC, BQSAC b=0.2) x 3 seeds, 4 periods of 1000 env steps, all present."""
+    sweep = {"strategy": ["none", "bernoulli"]}
+    return write_run_dir(tmp_path / "sweep", NONE_AND_BERNOULLI, sweep)
+
+
+# t(0.975, 2) = 4.302653; with sd 10 over 3 seeds: 4.302653 * 10 / sqrt(3) = 24.8414
+HALF_SD10_N3 = 24.8414
+
+
+def test_mean_ci95_hand_computed() -> None:
+    # values [1, 2, 3, 4]: mean 2.5; sd (ddof=1) = sqrt((2.25 + 0.25 + 0.25 + 2.25) / 3) = 1.2910;
+    # t(0.975, 3) = 3.1824; half-width = 3.1824 * 1.2910 / sqrt(4) = 2.0543
+    mean, half = results.mean_ci95(np.array([1.0, 2.0, 3.0, 4.0]))
+    assert mean == pytest.approx(2.5)
+    assert half == pytest.approx(2.0543, abs=1e-4)
+    # NaNs are dropped before anything else
+    assert results.mean_ci95(np.array([1.0, np.nan, 2.0, 3.0, 4.0])) == (mean, half)
+    one_mean, one_half = results.mean_ci95(np.array([5.0]))
+    assert one_mean == 5.0 and math.isnan(one_half)
+    assert all(math.isnan(v) for v in results.mean_ci95(np.array([np.nan])))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.floats(-1e4, 1e4), min_size=2, max_size=12))
+def test_mean_ci95_matches_scipy_interval(values: list[float]) -> None:
+    x = np.array(values)
+    mean, half = results.mean_ci95(x)
+    sem = stats.sem(x)
+    if sem == 0:
+        assert half == pytest.approx(0.0, abs=1e-9)
+        return
+    lo, hi = stats.t.interval(0.95, x.size - 1, loc=x.mean(), scale=sem)
+    assert mean == pytest.approx(x.mean(), abs=1e-9)
+    assert half == pytest.approx((hi - lo) / 2, rel=1e-6, abs=1e-9)
+
+
+def test_mean_ci95_columns_matches_scalar() -> None:
+    values = np.array([[1.0, 5.0, np.nan], [2.0, 5.0, 7.0], [3.0, np.nan, np.nan], [4.0, 8.0, 1.0]])
+    mean, half = results.mean_ci95_columns(values)
+    for col in range(values.shape[1]):
+        m, h = results.mean_ci95(values[:, col])
+        assert mean[col] == pytest.approx(m)
+        assert half[col] == pytest.approx(h)
+    assert half[0] == pytest.approx(2.0543, abs=1e-4)  # the [1, 2, 3, 4] example again
+
+
+def test_area_under_curve_is_mean_of_evaluations() -> None:
+    ret = np.array([[1.0, 2.0, 3.0, 6.0], [0.0, 0.0, 0.0, 4.0]])
+    auc = results.area_under_curve(ret, np.array([1000, 2000, 3000, 4000]))
+    np.testing.assert_allclose(auc, [3.0, 1.0])  # (1 + 2 + 3 + 6) / 4, 4 / 4
+    with pytest.raises(ValueError, match="evaluation points"):
+        results.area_under_curve(ret, np.array([1000, 2000]))
+
+
+def test_summarize_hand_computed(run_dir: Path) -> None:
+    rows = results.summarize(run_dir)
+    assert [r["cell"] for r in rows] == [0, 1]
+    assert [r["strategy"] for r in rows] == ["none", "bernoulli"]
+    assert rows[1]["cell_label"] == "strategy=bernoulli"
+    sac, bq = rows
+    assert sac["n_seeds"] == bq["n_seeds"] == 3
+    # final return: 100 * (cell + 1) * 4 + 10 * seed -> [400, 410, 420] and [800, 810, 820]
+    assert sac["final_return_mean"] == pytest.approx(410.0)
+    assert bq["final_return_mean"] == pytest.approx(810.0)
+    assert sac["final_return_ci95"] == pytest.approx(HALF_SD10_N3, abs=1e-3)
+    # AUC: mean over p of 100 * (c + 1) * (p + 1) + 10 s = 250 (c + 1) + 10 s -> 260 and 510
+    assert sac["auc_mean"] == pytest.approx(260.0)
+    assert bq["auc_mean"] == pytest.approx(510.0)
+    assert bq["auc_ci95"] == pytest.approx(HALF_SD10_N3, abs=1e-3)
+    # final demos: SAC 0; BQSAC seeds [80, 100, 100]: mean 93.333, sd sqrt(266.67 / 2) = 11.547,
+    # half-width 4.302653 * 11.547 / sqrt(3) = 28.684
+    assert sac["demos_used_mean"] == 0.0 and sac["demos_used_ci95"] == 0.0
+    assert bq["demos_used_mean"] == pytest.approx(93.3333, abs=1e-3)
+    assert bq["demos_used_ci95"] == pytest.approx(28.684, abs=1e-3)
+    assert bq["expert_return"] == 3000.0
+    assert bq["env_steps_per_second"] == 1500.0
+    assert bq["periods"] == 4 and bq["env_steps"] == 4000
+
+
+def test_write_summary_csv_schema_and_markdown(run_dir: Path) -> None:
+    csv_path, md_path = results.write_summary(run_dir)
+    assert csv_path == run_dir / "summary.csv" and md_path == run_dir / "summary.md"
+    with csv_path.open() as handle:
+        reader = csv.DictReader(handle)
+        table = list(reader)
+    assert reader.fieldnames == [
+        "cell",
+        "cell_label",
+        "strategy",
+        "n_seeds",
+        "final_return_mean",
+        "final_return_ci95",
+        "auc_mean",
+        "auc_ci95",
+        "demos_used_mean",
+        "demos_used_ci95",
+        "expert_return",
+        "env_steps_per_second",
+        "periods",
+        "env_steps",
+    ]
+    assert len(table) == 2
+    assert float(table[1]["final_return_mean"]) == pytest.approx(810.0)
+    assert float(table[0]["auc_mean"]) == pytest.approx(260.0)
+    md = md_path.read_text()
+    # two significant digits of the CI: 410 ± 24.84 -> "410 ± 25"; 93.33 ± 28.68 -> "93 ± 29"
+    assert "| 410 ± 25 |" in md
+    assert "| 810 ± 25 |" in md
+    assert "| 93 ± 29 |" in md
+    assert "| 0 ± 0 |" in md
+    assert "95% confidence interval" in md and "Student's t" in md
+    assert "Env steps per run: 4,000" in md and "[0, 1, 2]" in md
+    assert "Partial" not in md
+    # one header row, one separator, one row per cell
+    assert sum(line.startswith("|") for line in md.splitlines()) == 4
+
+
+def test_partial_run_is_summarised_over_periods_present(tmp_path: Path) -> None:
+    run_dir = write_run_dir(
+        tmp_path / "partial",
+        NONE_AND_BERNOULLI,
+        {"strategy": ["none", "bernoulli"]},
+        periods=2,
+        total_periods=4,
+        expert=None,
+    )
+    run = results.load_run(run_dir)
+    assert run["partial"] and run["periods"] == 2 and run["expected_periods"] == 4
+    sac, bq = results.summarize(run_dir)
+    # final = period 1: 200 (c + 1) + 10 s; AUC = mean(100, 200) (c + 1) + 10 s
+    assert sac["final_return_mean"] == pytest.approx(210.0)
+    assert bq["final_return_mean"] == pytest.approx(410.0)
+    assert sac["auc_mean"] == pytest.approx(160.0)
+    assert bq["auc_mean"] == pytest.approx(310.0)
+    # demos after 10 trace points: [40, 60, 80] -> 60 ± 4.302653 * 20 / sqrt(3) = 49.683
+    assert bq["demos_used_mean"] == pytest.approx(60.0)
+    assert bq["demos_used_ci95"] == pytest.approx(49.683, abs=1e-3)
+    assert bq["periods"] == 2 and bq["env_steps"] == 2000
+    assert math.isnan(bq["expert_return"])
+    _, md_path = results.write_summary(run_dir)
+    md = md_path.read_text()
+    assert "Partial run directory" in md and "2 of 4 evaluation periods" in md
+    assert "2,000 of 4,000 env steps" in md
+
+
+def test_missing_files_raise_helpful_errors(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        results.load_run(tmp_path / "nowhere")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(FileNotFoundError, match="config.json") as info:
+        results.summarize(empty)
+    assert "first chunk" in str(info.value)
+    run_dir = write_run_dir(tmp_path / "started", NONE_AND_BERNOULLI, {"strategy": ["none"]})
+    (run_dir / "metrics.npz").unlink()
+    with pytest.raises(FileNotFoundError, match=r"no metrics\.npz.*first chunk"):
+        results.write_summary(run_dir)
+    with pytest.raises(FileNotFoundError, match="metrics.npz"):
+        plots.plot_all(run_dir)
+
+
+def test_uncertainty_is_cut_at_budget_depletion(run_dir: Path) -> None:
+    run = results.load_run(run_dir)
+    x = plots.trace_env_steps(run)
+    # period p, slice j -> (p + (j + 1) / 5) * 1000: 200, 400, ..., 4000
+    np.testing.assert_allclose(x[:3], [200.0, 400.0, 600.0])
+    assert x[-1] == 4000.0 and x.size == PERIODS * TRACES
+    bernoulli_runs = [3, 4, 5]  # cell 1, seeds 0, 1, 2 (see DEMO_RATE)
+    lengths = [plots.uncertainty_before_depletion(run, r)[1].size for r in bernoulli_runs]
+    assert lengths == [20, 17, 13]
+    # a run that never queries keeps its whole trace
+    assert plots.uncertainty_before_depletion(run, 0)[1].size == 20
+
+
+def _png_ok(path: Path) -> bool:
+    return path.stat().st_size > 1000 and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_plot_all_without_active_cells_skips_fig7(run_dir: Path) -> None:
+    paths = plots.plot_all(run_dir)
+    assert {p.stem for p in paths} == {
+        "fig3_uncertainty",
+        "fig4_5_returns",
+        "fig6_bernoulli",
+        "fig8_states",
+        "fig9_budget",
+    }
+    assert all(p.parent == run_dir / "figures" and _png_ok(p) for p in paths)
+    assert not (run_dir / "figures" / "fig7_active.png").exists()
+
+
+def test_plot_all_full_sweep_has_every_figure_and_split_panels(tmp_path: Path) -> None:
+    cells = [
+        {"strategy": "none", "uncertainty": "intrinsic"},
+        {"strategy": "active", "uncertainty": "intrinsic", "t_query": 0.1},
+        {"strategy": "active", "uncertainty": "intrinsic", "t_query": 0.3},
+        {"strategy": "bernoulli", "uncertainty": "extrinsic", "query_prob": 0.2},
+        {"strategy": "bernoulli", "uncertainty": "extrinsic", "query_prob": 0.4},
+        {"strategy": "active", "uncertainty": "extrinsic", "t_query": 0.1},
+    ]
+    sweep = {
+        "strategy": ["none", "bernoulli", "active"],
+        "uncertainty": ["intrinsic", "extrinsic"],
+        "query_prob": [0.2, 0.4],
+        "t_query": [0.1, 0.3],
+    }
+    run_dir = write_run_dir(tmp_path / "full", cells, sweep, periods=3, total_periods=4)
+    paths = {p.stem: p for p in plots.plot_all(run_dir)}
+    assert set(paths) == set(plots.FIGURES)
+    assert all(_png_ok(p) for p in paths.values())
+    # both uncertainty measures present -> Fig. 4 and Fig. 5 side by side (a wide image)
+    height, width = imread(paths["fig4_5_returns"]).shape[:2]
+    assert width > 1.8 * height
+
+
+def test_plot_all_without_queries_draws_whole_run_uncertainty(tmp_path: Path) -> None:
+    run_dir = write_run_dir(
+        tmp_path / "sac", [{"strategy": "none"}], {}, periods=PERIODS, expert=None
+    )
+    run = results.load_run(run_dir)
+    fig = plots.fig3_uncertainty(run)
+    assert fig is not None and "whole run" in fig.get_suptitle()
+    drawn = [name for name, make in plots.FIGURES.items() if make(run) is not None]
+    assert drawn == ["fig3_uncertainty", "fig4_5_returns"]
