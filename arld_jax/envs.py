@@ -70,14 +70,14 @@ _TOY_W = np.random.default_rng(0).normal(size=(_TOY_OBS_DIM, _TOY_ACTION_DIM)).a
 
 def toy_target_action(obs: jax.Array) -> jax.Array:
     """The toy env's best action in state `obs` (the 'expert' of the tests)."""
-    return jnp.tanh(obs @ _TOY_W)
+    return jnp.tanh(2.0 * obs @ _TOY_W)
 
 
 def _toy_env() -> Env:
     """A seconds-to-compile stand-in with HalfCheetah's interface (fixed-length, never terminates).
 
-    reward = 1 - mean_j (a_j - tanh(W s)_j)^2, s' = clip(0.9 s + 0.3 [a, -a], -2, 2). A uniform-random
-    policy earns about 0.6 per step, the best policy about 1.
+    reward = 1 - mean_j (a_j - tanh(2 W s)_j)^2, s' = clip(0.9 s + 0.3 [a, -a], -2, 2). The best
+    policy earns 1 per step, always acting 0 about 0.4, uniform-random actions about 0.
     """
 
     def reset(key: PRNGKey, n: int) -> EnvState:

@@ -321,9 +321,9 @@ def run_sweep(
     done = 0
     if resumed and mngr.latest_step() is not None:
         done = mngr.latest_step()
-        abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, _keys_to_data(state))
+        abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, to_checkpoint(state))
         restored = mngr.restore(done, args=ocp.args.StandardRestore(abstract))
-        state = _data_to_keys(restored, state)
+        state = from_checkpoint(restored, state)
         saved = np.load(out / METRICS_FILE)
         metrics = {
             k: saved[k][:, : done * chunk] for k in saved.files if not k.startswith("state_")
@@ -350,7 +350,7 @@ def run_sweep(
             metrics[k] = np.concatenate([metrics[k], v], axis=1) if k in metrics else v
         samples = _state_samples(state, num_runs)
         _save_npz(out / METRICS_FILE, metrics | samples)  # before the checkpoint (see resume)
-        mngr.save(c + 1, args=ocp.args.StandardSave(_keys_to_data(state)))
+        mngr.save(c + 1, args=ocp.args.StandardSave(to_checkpoint(state)))
         mngr.wait_until_finished()
         chunks_this_call += 1
         steps_done = (c + 1) * chunk * cfg.eval_every
@@ -402,19 +402,39 @@ def _expert_for(cfg: Config):  # noqa: ANN202
         raise SystemExit(f"error: {err}") from None
 
 
-def _keys_to_data(tree):  # noqa: ANN001, ANN202
-    """Typed PRNG keys -> raw uint32 data (orbax stores plain arrays)."""
+def _is_key(x: Any) -> bool:
     import jax
 
-    is_key = lambda x: hasattr(x, "dtype") and jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)  # noqa: E731
-    return jax.tree.map(lambda x: jax.random.key_data(x) if is_key(x) else x, tree)
+    return hasattr(x, "dtype") and jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)
 
 
-def _data_to_keys(tree, like):  # noqa: ANN001, ANN202
+def to_checkpoint(state: Any) -> dict[str, Any]:
+    """The state's leaves as a flat {index: array} dict for orbax: typed PRNG keys become their raw
+    uint32 data, and zero-size leaves (orbax refuses them; e.g. MJX's empty actuator arrays) are
+    left out: `from_checkpoint` takes them from a template state."""
     import jax
 
-    is_key = lambda x: hasattr(x, "dtype") and jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)  # noqa: E731
-    return jax.tree.map(lambda d, x: jax.random.wrap_key_data(d) if is_key(x) else d, tree, like)
+    leaves = jax.tree.leaves(state)
+    return {
+        f"{i:05d}": jax.random.key_data(x) if _is_key(x) else x
+        for i, x in enumerate(leaves)
+        if x.size > 0
+    }
+
+
+def from_checkpoint(saved: dict[str, Any], template: Any) -> Any:
+    """Inverse of `to_checkpoint`, with structure, key types and empty leaves from `template`."""
+    import jax
+
+    leaves, treedef = jax.tree.flatten(template)
+    out = []
+    for i, x in enumerate(leaves):
+        if x.size == 0:
+            out.append(x)
+        else:
+            data = saved[f"{i:05d}"]
+            out.append(jax.random.wrap_key_data(data) if _is_key(x) else data)
+    return jax.tree.unflatten(treedef, out)
 
 
 def _state_samples(state, num_runs: int) -> dict[str, np.ndarray]:  # noqa: ANN001

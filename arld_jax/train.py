@@ -58,7 +58,7 @@ def init_state_sample(size: int, obs_dim: int) -> StateSample:
     return StateSample(
         obs=jnp.zeros((size, obs_dim)),
         env_step=jnp.zeros((size,), jnp.int32),
-        key=jnp.full((size,), -1.0),
+        key=jnp.full((size,), -1.0, jnp.float32),
     )
 
 

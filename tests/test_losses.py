@@ -325,3 +325,19 @@ def test_autotuned_alpha_moves_against_the_entropy_gap(
     else:
         assert metrics.entropy < target_entropy
         assert alpha1 > alpha0
+
+
+def test_no_update_measures_the_same_td_and_changes_nothing(fixed_alpha_agent: _Compiled) -> None:
+    """The warm-up variant returns the TD errors `update` would use for priorities, same key."""
+    a = fixed_alpha_agent
+    state = a.init()
+    batch, weights = _batch()
+    key = jax.random.key(5)
+    kept, td0, metrics = jax.jit(a.agent.no_update)(state, batch, weights, a.hp, key)
+    _, td1, _ = a.update(state, batch, weights, a.hp, key)
+    np.testing.assert_allclose(td0, td1, rtol=1e-5, atol=1e-6)
+    assert np.max(np.abs(np.asarray(td0))) > 0.1  # rewards ~2 vs Q ~0: a real TD error
+    for got, want in zip(jax.tree.leaves(kept), jax.tree.leaves(state), strict=True):
+        np.testing.assert_array_equal(got, want)
+    assert float(metrics.critic_loss) == float(metrics.actor_loss) == 0.0
+    np.testing.assert_allclose(metrics.alpha, INIT_ALPHA, rtol=1e-6)

@@ -335,6 +335,14 @@ def test_bernoulli_rate_among_decision_steps_is_b(
     assert p > 1e-5, (queries, decisions, b)
 
 
+def test_bernoulli_extremes() -> None:
+    u = _stream(0, T, 4)
+    never = _simulate(_hp(query.BERNOULLI, b=0.0, c=1, budget=BIG_BUDGET), u, 10)
+    always = _simulate(_hp(query.BERNOULLI, b=1.0, c=1, budget=BIG_BUDGET), u, 10)
+    assert not never["new_query"].any()
+    assert always["new_query"].all() and always["final_used"] == T * 4
+
+
 @STAT_SETTINGS
 @given(
     t_query=st.floats(0.05, 0.7),
@@ -364,6 +372,54 @@ def test_active_rate_is_t_query_on_a_stationary_stream(
     )
     assert abs(rate - p_exact) < tol, (rate, p_exact, tol)
     assert abs(rate - t_query) < tol + 1 / N_LARGE
+
+
+def test_fraction_above_counts_strictly_greater_valid_entries() -> None:
+    # Valid entries (count = 5): [1, 2, 2, 3, 5]; the last two slots are stale and ignored.
+    window = jnp.array([1.0, 2.0, 2.0, 3.0, 5.0, 9.0, 9.0])
+    count = jnp.int32(5)
+    for u, above in ((2.0, 2), (1.0, 4), (0.0, 5), (5.0, 0), (2.5, 2)):
+        np.testing.assert_allclose(query.fraction_above(window, count, jnp.float32(u)), above / 5)
+
+
+@SETTINGS
+@given(
+    t_query=st.floats(0.01, 1.0),
+    c=st.integers(1, 12),
+    budget=st.sampled_from([0, 5, 60, 300, BIG_BUDGET]),
+    num_envs=st.sampled_from([1, 4]),
+    length=st.integers(7, 40),
+    window_records=st.sampled_from(["all", "agent"]),
+    ties=st.booleans(),
+    seed=st.integers(0, 2**31 - 1),
+)
+def test_active_queries_exactly_when_u_ranks_in_the_top_t_query(
+    t_query: float,
+    c: int,
+    budget: int,
+    num_envs: int,
+    length: int,
+    window_records: str,
+    ties: bool,
+    seed: int,
+) -> None:
+    """Every decision of the active strategy, replayed: query iff the fraction of window values
+    strictly above u is below t_query (ties do not count as above), budget and runs permitting."""
+    u = _stream(seed, T, num_envs, ties)
+    res = _simulate(
+        _hp(query.ACTIVE, 0.0, t_query, c, budget), u, length, seed, N_SMALL, window_records
+    )
+    _check_against_rules(
+        u,
+        res,
+        strategy=query.ACTIVE,
+        t_query=t_query,
+        c=c,
+        budget=budget,
+        length=length,
+        window_size=N_SMALL,
+        window_records=window_records,
+    )
 
 
 def test_empty_window_never_queries() -> None:

@@ -1,0 +1,1167 @@
+"""Throughput, scaling and memory benchmark of arld_jax on this machine (CPU).
+
+    python benchmarks/bench.py                    # everything (about an hour on 2 cores)
+    python benchmarks/bench.py --quick            # tiny sizes, toy env for the trainer: smoke test
+    python benchmarks/bench.py --only matmul,flops,update --skip-mjx
+
+Sections, in the order they run (benchmarks/README.md says what each figure means):
+
+    matmul      f32 and bf16-input matmul GFLOP/s at 256-wide shapes: the machine's ceiling
+    flops       FLOPs of one SAC update (XLA cost analysis and an analytic count) -> updates/s limit
+    env         env-only env steps/s with random actions (MJX HalfCheetah, 1 and 16 envs)
+    update      update-only updates/s at B=256 on a fixed batch (f32 and bf16 matmul inputs)
+    trainer     the full trainer (1 env; 16 envs), with a breakdown of where a period's time goes
+    seeds       total updates/s of 1, 2, 4, 8 vmapped seeds against one seed run N times
+    first_step  cold and warm (persistent compilation cache) time to the first training chunk
+    memory      replay and TrainState bytes per seed at replay capacity 1M
+
+Every section prints a table as soon as it finishes, and the JSON report
+(benchmarks/results/<host>-<date>.json) is rewritten after each one, so a killed run keeps what it
+measured. Timings are wall-clock around `block_until_ready`, after a warm-up call that compiles.
+This process does NOT use the persistent compilation cache, so its compile times are real; only the
+`first_step` children do, each with its own fresh cache directory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import importlib.metadata
+import json
+import math
+import os
+import platform
+import shutil
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from arld_jax.agent import Agent, make_agent
+from arld_jax.config import Config, hparams_from_config
+from arld_jax.envs import Env, make_env
+from arld_jax.networks import NUM_CRITICS
+from arld_jax.replay import PrioritizedReplay, make_prioritized_replay, replay_nbytes
+from arld_jax.train import Trainer, make_train
+from arld_jax.types import Transition
+
+SECTIONS: tuple[str, ...] = (
+    "matmul",
+    "flops",
+    "env",
+    "update",
+    "trainer",
+    "seeds",
+    "first_step",
+    "memory",
+)
+RESULTS_DIR = Path(__file__).resolve().parent / "results"
+CHILD_MARKER = "FIRST_STEP_RESULT "
+# HalfCheetah's sizes; the update-only and FLOP figures use them even when the env is skipped.
+HC_OBS_DIM, HC_ACTION_DIM = 17, 6
+PAPER_HIDDEN, PAPER_BATCH = (256, 256), 256
+
+
+@dataclass(frozen=True)
+class Sizes:
+    """How much work each section does (full run or --quick)."""
+
+    matmul_steps: int  # matmuls in one scanned chain
+    repeats: int  # timed calls per measurement (after one warm-up call)
+    env_counts: tuple[int, ...]  # parallel envs of the env-only section
+    env_steps: int  # scanned env steps per env-only call
+    updates: int  # scanned SAC updates per update-only call
+    period_env_steps: int  # env steps in one trainer period (eval_every)
+    timed_periods: int  # trainer periods timed after the warm-up period
+    seed_counts: tuple[int, ...]  # vmapped seeds of the seeds section
+    trainer_hidden: tuple[int, ...]  # network of the trainer sections
+    trainer_batch: int
+    trainer_capacity: int
+    toy_episode_length: int
+
+
+FULL = Sizes(
+    matmul_steps=1000,
+    repeats=5,
+    env_counts=(1, 16),
+    env_steps=200,
+    updates=100,
+    period_env_steps=2000,
+    timed_periods=2,
+    seed_counts=(1, 2, 4, 8),
+    trainer_hidden=PAPER_HIDDEN,
+    trainer_batch=PAPER_BATCH,
+    trainer_capacity=100_000,
+    toy_episode_length=1000,
+)
+QUICK = Sizes(
+    matmul_steps=50,
+    repeats=2,
+    env_counts=(1,),  # a single MJX compile
+    env_steps=20,
+    updates=10,
+    period_env_steps=160,
+    timed_periods=1,
+    seed_counts=(1, 2),
+    trainer_hidden=(64, 64),
+    trainer_batch=64,
+    trainer_capacity=10_000,
+    toy_episode_length=100,
+)
+
+
+# ---------------------------------------------------------------- small helpers
+
+
+def log(msg: str = "") -> None:
+    """Print and flush at once, so a long run shows its progress."""
+    print(msg, flush=True)
+
+
+def block(tree: Any) -> Any:
+    """Wait for every array of `tree` (JAX dispatch is asynchronous)."""
+    return jax.block_until_ready(tree)
+
+
+def time_calls(fn: Callable[[], Any], repeats: int) -> list[float]:
+    """Seconds of `repeats` calls of `fn` (each waited for), after one untimed warm-up call."""
+    block(fn())
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        block(fn())
+        times.append(time.perf_counter() - start)
+    return times
+
+
+def summarize(times: Sequence[float]) -> dict[str, Any]:
+    """Median and best of a list of timings."""
+    return {"median_s": statistics.median(times), "min_s": min(times), "all_s": list(times)}
+
+
+def tree_nbytes(tree: Any) -> int:
+    """Bytes of every leaf of `tree`; works on arrays and on `jax.eval_shape` outputs alike."""
+    return int(sum(math.prod(x.shape) * x.dtype.itemsize for x in jax.tree.leaves(tree)))
+
+
+def broadcast_seeds(tree: Any, n: int) -> Any:
+    """Give every leaf a leading seed axis of size `n`."""
+    return jax.tree.map(lambda x: jnp.broadcast_to(x, (n, *jnp.shape(x))), tree)
+
+
+def print_table(title: str, header: Sequence[str], rows: Sequence[Sequence[Any]]) -> None:
+    """A plain aligned text table."""
+    cells = [[str(h) for h in header]] + [[_fmt(c) for c in r] for r in rows]
+    widths = [max(len(r[i]) for r in cells) for i in range(len(header))]
+    line = "  ".join("-" * w for w in widths)
+    log(f"\n== {title}")
+    for i, r in enumerate(cells):
+        log(
+            "  ".join(
+                c.rjust(w) if j else c.ljust(w)
+                for j, (c, w) in enumerate(zip(r, widths, strict=True))
+            )
+        )
+        if i == 0:
+            log(line)
+
+
+def _fmt(x: Any) -> str:
+    if isinstance(x, float):
+        if math.isnan(x):
+            return "n/a"
+        return f"{x:,.3g}" if abs(x) < 100 else f"{x:,.0f}"
+    if isinstance(x, int):
+        return f"{x:,}"
+    return str(x)
+
+
+def example_transition(obs_dim: int, action_dim: int) -> Transition:
+    """One replay item of the given sizes (zeros), as train.py stores it."""
+    return Transition(
+        obs=jnp.zeros(obs_dim),
+        action=jnp.zeros(action_dim),
+        reward=jnp.zeros(()),
+        next_obs=jnp.zeros(obs_dim),
+        terminated=jnp.zeros(()),
+        is_demo=jnp.zeros(()),
+    )
+
+
+def random_batch(key: jax.Array, batch: int, obs_dim: int, action_dim: int) -> Transition:
+    """A fixed random minibatch for the update-only measurement."""
+    k_obs, k_act, k_rew, k_next = jax.random.split(key, 4)
+    return Transition(
+        obs=jax.random.normal(k_obs, (batch, obs_dim)),
+        action=jax.random.uniform(k_act, (batch, action_dim), minval=-1.0, maxval=1.0),
+        reward=jax.random.normal(k_rew, (batch,)),
+        next_obs=jax.random.normal(k_next, (batch, obs_dim)),
+        terminated=jnp.zeros(batch),
+        is_demo=jnp.zeros(batch),
+    )
+
+
+# ---------------------------------------------------------------- the report
+
+
+@dataclass
+class Bench:
+    """The run's options, its JSON report and measurements shared between sections."""
+
+    args: argparse.Namespace
+    sizes: Sizes
+    out: Path
+    report: dict[str, Any]
+    memo: dict[Any, Any] = field(default_factory=dict)
+
+    @property
+    def toy_trainer(self) -> bool:
+        """The trainer sections use the toy env (--quick or --skip-mjx)."""
+        return self.args.quick or self.args.skip_mjx
+
+    def save(self) -> None:
+        """Rewrite the JSON report atomically."""
+        self.out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.out.with_suffix(".tmp")
+        tmp.write_text(json.dumps(self.report, indent=2, default=_json_default) + "\n")
+        os.replace(tmp, self.out)
+
+
+def _json_default(x: Any) -> Any:
+    if hasattr(x, "item"):
+        return x.item()
+    return str(x)
+
+
+def machine_info(args: argparse.Namespace) -> dict[str, Any]:
+    """Versions, CPU model and flags, core count, date, load and the exact command."""
+    versions = {}
+    for pkg in ("jax", "jaxlib", "brax", "mujoco", "mujoco-mjx", "flax", "optax", "numpy"):
+        try:
+            versions[pkg] = importlib.metadata.version(pkg)
+        except importlib.metadata.PackageNotFoundError:
+            versions[pkg] = None
+    cpuinfo = Path("/proc/cpuinfo").read_text() if Path("/proc/cpuinfo").exists() else ""
+    model = next(
+        (ln.split(":", 1)[1].strip() for ln in cpuinfo.splitlines() if "model name" in ln), ""
+    )
+    flags_line = next(
+        (ln.split(":", 1)[1] for ln in cpuinfo.splitlines() if ln.startswith("flags")), ""
+    )
+    wanted = ("avx2", "fma", "avx512f", "avx512_bf16", "avx512_vnni", "amx_bf16", "amx_tile")
+    return {
+        "date": datetime.datetime.now().isoformat(timespec="seconds"),
+        "hostname": socket.gethostname(),
+        "command": " ".join([sys.executable, *sys.argv]),
+        "mode": "quick" if args.quick else "full",
+        "skip_mjx": args.skip_mjx,
+        "versions": versions,
+        "python": platform.python_version(),
+        "cpu_model": model or platform.processor(),
+        "cpu_flags": [f for f in wanted if f in flags_line.split()],
+        "cpu_count": os.cpu_count(),
+        "cpus_usable": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
+        "devices": [str(d) for d in jax.devices()],
+        "load_average_at_start": list(os.getloadavg()),
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
+        "persistent_cache_dir_in_parent": jax.config.jax_compilation_cache_dir,
+    }
+
+
+# ---------------------------------------------------------------- 1. matmul throughput
+
+
+def matmul_chain(steps: int, dtype: jnp.dtype) -> Callable[..., jax.Array]:
+    """Jitted lax.scan of `steps` matmuls x <- tanh(x @ w), [E,256,256] @ [E,256,256].
+
+    Inputs in `dtype`, accumulation in f32 (`preferred_element_type`). The tanh keeps values in
+    range (no inf, no denormals) for any chain length; it costs a few percent of the matmul and is
+    not counted, so the GFLOP/s are slightly conservative."""
+
+    def chain(x: jax.Array, w: jax.Array) -> jax.Array:
+        def body(x: jax.Array, _: None) -> tuple[jax.Array, None]:
+            y = jnp.einsum("eij,ejk->eik", x, w, preferred_element_type=jnp.float32)
+            return jnp.tanh(y).astype(dtype), None
+
+        x, _ = jax.lax.scan(body, x, None, length=steps)
+        return x
+
+    return jax.jit(chain)
+
+
+def measure_matmul(sizes: Sizes, ensembles: int, dtype: jnp.dtype, width: int = 256) -> dict:
+    """GFLOP/s of the chain (2 * width^3 FLOPs per matmul per ensemble member)."""
+    k_x, k_w = jax.random.split(jax.random.key(0))
+    shape = (ensembles, width, width)
+    x = jax.random.normal(k_x, shape).astype(dtype)
+    w = (1.5 / math.sqrt(width) * jax.random.normal(k_w, shape)).astype(dtype)
+    chain = matmul_chain(sizes.matmul_steps, dtype)
+    times = time_calls(lambda: chain(x, w), sizes.repeats)
+    flops = 2 * width**3 * ensembles * sizes.matmul_steps
+    return summarize(times) | {
+        "flops_per_call": flops,
+        "gflops_median": flops / statistics.median(times) / 1e9,
+        "gflops_best": flops / min(times) / 1e9,
+    }
+
+
+def section_matmul(b: Bench) -> dict:
+    """f32 and bf16-input (f32 accumulation) matmul throughput, single and 8-ensemble batched."""
+    out = {}
+    for dtype_name, dtype in (("float32", jnp.float32), ("bfloat16", jnp.bfloat16)):
+        for ensembles in (1, 8):
+            out[f"{dtype_name}_e{ensembles}"] = measure_matmul(b.sizes, ensembles, dtype)
+    out["note"] = (
+        f"lax.scan of {b.sizes.matmul_steps} x <- tanh(x @ w), [E,256,256] @ [E,256,256], jitted, "
+        "timed after a warm-up call; gflops_best is the physical ceiling used elsewhere"
+    )
+    rows = [
+        [k.replace("_e", " x"), v["gflops_median"], v["gflops_best"], v["median_s"] * 1e3]
+        for k, v in out.items()
+        if isinstance(v, dict)
+    ]
+    print_table(
+        "matmul throughput, 256-wide (dtype x ensembles)",
+        ["shape", "GFLOP/s median", "GFLOP/s best", "ms/call"],
+        rows,
+    )
+    return out
+
+
+def matmul_gflops(b: Bench, dtype_name: str = "float32") -> float:
+    """Best 256-wide GFLOP/s of `dtype_name` (single and 8-ensemble, the larger), measured once."""
+    if "matmul" not in b.report["sections"]:
+        log("(measuring matmul throughput first: the physical limit needs it)")
+        run_section(b, "matmul")
+    m = b.report["sections"]["matmul"]
+    return max(m[f"{dtype_name}_e1"]["gflops_best"], m[f"{dtype_name}_e8"]["gflops_best"])
+
+
+# ---------------------------------------------------------------- 2. FLOPs of one update
+
+
+def dense_layers(in_dim: int, hidden: Sequence[int], head_dims: Sequence[int]) -> list:
+    """(in, out) of every Dense layer of an MLP trunk followed by parallel heads."""
+    dims = [in_dim, *hidden]
+    return list(zip(dims[:-1], dims[1:], strict=True)) + [(dims[-1], o) for o in head_dims]
+
+
+def layer_flops(layers: Sequence[tuple[int, int]], rows: int) -> int:
+    """Forward matmul FLOPs of `layers` on `rows` inputs (one multiply-add = 2 FLOPs)."""
+    return sum(2 * rows * i * o for i, o in layers)
+
+
+def analytic_update_flops(
+    obs_dim: int, action_dim: int, hidden: Sequence[int], batch: int
+) -> dict[str, int]:
+    """Matmul FLOPs of ONE `agent.update` (SAC, twin critics, fixed alpha), counted by hand.
+
+    A Dense layer i -> o on B rows costs 2*B*i*o forward; its backward costs 2*B*i*o for the weight
+    gradient and another 2*B*i*o for the input gradient, the latter only when something upstream
+    needs it (never for the first layer of the differentiated network, whose input is data).
+
+      actor  = obs -> hidden... -> {mean head, log-std head}, each [h_last -> action_dim]
+               (the NoisyDense variance matmul x^2 @ sigma_w^2 feeds no loss, so XLA drops it)
+      critic = concat(obs, action) -> hidden... -> 1, NUM_CRITICS of them (twin)
+
+      critic loss = actor fwd on next_obs                      (sample a', log pi(a'|s'))
+                  + target twin-critic fwd on (next_obs, a')
+                  + twin-critic fwd on (obs, action)
+                  + twin-critic bwd: weight grads of every layer, input grads of all but the first
+      actor loss  = actor fwd on obs
+                  + twin-critic fwd on (obs, a) with the new critic params
+                  + twin-critic bwd down to the action: input grads of every layer (the first
+                    layer's input grad is computed for the whole concat(obs, a), an upper bound),
+                    no critic weight grads
+                  + actor bwd: weight grads of every layer, input grads of all but the first
+
+    Not counted (elementwise, O(params) or O(B * action_dim)): Adam, Polyak averaging,
+    tanh-Gaussian log-probs, losses, noise sampling. XLA's cost analysis counts those too (and may
+    count some ops differently), so its figure is somewhat higher.
+    """
+    actor = dense_layers(obs_dim, hidden, (action_dim, action_dim))
+    critic = dense_layers(obs_dim + action_dim, hidden, (1,))
+    actor_fwd = layer_flops(actor, batch)
+    twin_fwd = NUM_CRITICS * layer_flops(critic, batch)
+    twin_input_grads_but_first = NUM_CRITICS * layer_flops(critic[1:], batch)
+    actor_input_grads_but_first = layer_flops(actor[1:], batch)
+    critic_loss = actor_fwd + twin_fwd + twin_fwd + twin_fwd + twin_input_grads_but_first
+    actor_loss = actor_fwd + twin_fwd + twin_fwd + actor_fwd + actor_input_grads_but_first
+    return {
+        "critic_loss_and_grad": critic_loss,
+        "actor_loss_and_grad": actor_loss,
+        "total": critic_loss + actor_loss,
+        "actor_forward": actor_fwd,
+        "twin_critic_forward": twin_fwd,
+    }
+
+
+def xla_flops(compiled: Any) -> float:
+    """The 'flops' entry of a compiled program's cost analysis (a dict, or a list of dicts)."""
+    cost = compiled.cost_analysis()
+    if isinstance(cost, dict):
+        cost = [cost]
+    return float(sum(c.get("flops", 0.0) for c in cost or [] if c))
+
+
+def agent_and_inputs(
+    cfg: Config, obs_dim: int, action_dim: int
+) -> tuple[Agent, Any, Transition, jax.Array, Any]:
+    """An agent of `cfg`, its initial state, a fixed random batch, unit IS weights and hparams."""
+    hp = hparams_from_config(cfg)
+    agent = make_agent(cfg, obs_dim, action_dim)
+    k_init, k_batch = jax.random.split(jax.random.key(0))
+    state = agent.init(k_init, hp)
+    batch = random_batch(k_batch, cfg.batch_size, obs_dim, action_dim)
+    return agent, state, batch, jnp.ones(cfg.batch_size), hp
+
+
+def section_flops(b: Bench) -> dict:
+    """FLOPs of one SAC update at B=256, 2x256 (obs 17, action 6), and the updates/s it allows."""
+    cfg = Config(hidden_sizes=PAPER_HIDDEN, batch_size=PAPER_BATCH)
+    agent, state, batch, weights, hp = agent_and_inputs(cfg, HC_OBS_DIM, HC_ACTION_DIM)
+    lowered = jax.jit(agent.update).lower(state, batch, weights, hp, jax.random.key(1))
+    from_xla = xla_flops(lowered.compile())
+    analytic = analytic_update_flops(HC_OBS_DIM, HC_ACTION_DIM, PAPER_HIDDEN, PAPER_BATCH)
+    f32, bf16 = matmul_gflops(b, "float32"), matmul_gflops(b, "bfloat16")
+    out = {
+        "obs_dim": HC_OBS_DIM,
+        "action_dim": HC_ACTION_DIM,
+        "hidden_sizes": list(PAPER_HIDDEN),
+        "batch_size": PAPER_BATCH,
+        "xla_cost_analysis_flops": from_xla,
+        "analytic_matmul_flops": analytic,
+        "matmul_gflops_f32_best": f32,
+        "matmul_gflops_bf16_best": bf16,
+        "limit_updates_per_s_f32": f32 * 1e9 / analytic["total"],
+        "limit_updates_per_s_bf16": bf16 * 1e9 / analytic["total"],
+        "limit_updates_per_s_f32_xla_flops": f32 * 1e9 / from_xla if from_xla else float("nan"),
+        "note": "limit = best 256-wide matmul FLOP/s / analytic matmul FLOPs of one update",
+    }
+    print_table(
+        "one SAC update, B=256, 2x256, obs 17, action 6",
+        ["quantity", "value"],
+        [
+            ["XLA cost analysis, GFLOP/update", from_xla / 1e9],
+            ["analytic matmul count, GFLOP/update", analytic["total"] / 1e9],
+            ["  of which critic loss + grad", analytic["critic_loss_and_grad"] / 1e9],
+            ["  of which actor loss + grad", analytic["actor_loss_and_grad"] / 1e9],
+            ["physical limit f32, updates/s", out["limit_updates_per_s_f32"]],
+            ["physical limit bf16, updates/s", out["limit_updates_per_s_bf16"]],
+        ],
+    )
+    return out
+
+
+def limit_updates_per_s(b: Bench, cfg: Config, obs_dim: int, action_dim: int) -> float:
+    """Physical limit of `cfg`'s update (its own sizes) at the measured 256-wide matmul rate."""
+    dtype_name = "bfloat16" if cfg.matmul_dtype == "bfloat16" else "float32"
+    flops = analytic_update_flops(obs_dim, action_dim, cfg.hidden_sizes, cfg.batch_size)["total"]
+    return matmul_gflops(b, dtype_name) * 1e9 / flops
+
+
+# ---------------------------------------------------------------- 3. env-only
+
+
+def env_rollout(env: Env, num_envs: int, steps: int) -> Callable[[jax.Array], jax.Array]:
+    """Jitted reset, then a lax.scan of `steps` env steps with uniform random actions in [-1, 1].
+
+    The reset sits in the same program so MJX compiles once (an MJX compile takes minutes); it
+    costs about one step, i.e. <= 1/steps of a call."""
+
+    def rollout(key: jax.Array) -> jax.Array:
+        k_reset, k_steps = jax.random.split(key)
+
+        def body(s: Any, k: jax.Array) -> tuple[Any, jax.Array]:
+            a = jax.random.uniform(k, (num_envs, env.action_dim), minval=-1.0, maxval=1.0)
+            s = env.step(s, a)
+            return s, jnp.sum(s.reward)
+
+        state = env.reset(k_reset, num_envs)
+        _, rewards = jax.lax.scan(body, state, jax.random.split(k_steps, steps))
+        return jnp.sum(rewards)
+
+    return jax.jit(rollout)
+
+
+def env_config(env_name: str, num_envs: int) -> Config:
+    """A valid Config with `num_envs` envs (eval_every must be a multiple of num_envs, so the
+    default Config(num_envs=16) is rejected; only env_name and num_envs matter to make_env)."""
+    period = 1000 * num_envs
+    return Config(
+        env_name=env_name, num_envs=num_envs, eval_every=period, total_env_steps=10 * period
+    )
+
+
+def env_steps_per_s(b: Bench, env_name: str, num_envs: int) -> dict:
+    """Env-only env steps/s of `env_name` with `num_envs` parallel envs (memoized)."""
+    memo_key = ("env", env_name, num_envs)
+    if memo_key not in b.memo:
+        start = time.perf_counter()
+        env = make_env(env_config(env_name, num_envs))
+        make_env_s = time.perf_counter() - start
+        rollout = env_rollout(env, num_envs, b.sizes.env_steps)
+        start = time.perf_counter()
+        block(rollout(jax.random.key(1)))  # compile + first call
+        first_call_s = time.perf_counter() - start
+        times = time_calls(lambda: rollout(jax.random.key(2)), b.sizes.repeats)
+        steps = num_envs * b.sizes.env_steps
+        b.memo[memo_key] = summarize(times) | {
+            "env": env_name,
+            "num_envs": num_envs,
+            "steps_per_call": steps,
+            "make_env_s": make_env_s,
+            "compile_and_first_call_s": first_call_s,
+            "note": "each call = one reset (in the same program) + the scanned steps",
+            "env_steps_per_s": steps / statistics.median(times),
+        }
+    return b.memo[memo_key]
+
+
+def section_env(b: Bench) -> dict:
+    """Env-only throughput (random actions, no agent, no replay)."""
+    env_name = "toy" if b.args.skip_mjx else "halfcheetah"
+    results = {f"{env_name}_{n}": env_steps_per_s(b, env_name, n) for n in b.sizes.env_counts}
+    print_table(
+        f"env only, random actions, {b.sizes.env_steps} scanned steps per call",
+        ["env", "envs", "env steps/s", "ms/call", "compile+1st call s"],
+        [
+            [
+                r["env"],
+                r["num_envs"],
+                r["env_steps_per_s"],
+                r["median_s"] * 1e3,
+                r["compile_and_first_call_s"],
+            ]
+            for r in results.values()
+        ],
+    )
+    return results
+
+
+# ---------------------------------------------------------------- 4. update-only
+
+
+def update_scan(agent: Agent, num_updates: int) -> Callable[..., Any]:
+    """Jitted lax.scan of `num_updates` SAC updates on one fixed batch."""
+
+    def run(state: Any, batch: Transition, weights: jax.Array, hp: Any, key: jax.Array) -> Any:
+        def body(s: Any, k: jax.Array) -> tuple[Any, jax.Array]:
+            s, _, metrics = agent.update(s, batch, weights, hp, k)
+            return s, metrics.critic_loss
+
+        return jax.lax.scan(body, state, jax.random.split(key, num_updates))
+
+    return jax.jit(run)
+
+
+def updates_per_s(b: Bench, cfg: Config, obs_dim: int, action_dim: int) -> dict:
+    """Update-only updates/s of `cfg`'s agent (memoized on the shapes and dtype)."""
+    memo_key = ("update", obs_dim, action_dim, cfg.hidden_sizes, cfg.batch_size, cfg.matmul_dtype)
+    if memo_key not in b.memo:
+        agent, state, batch, weights, hp = agent_and_inputs(cfg, obs_dim, action_dim)
+        run = update_scan(agent, b.sizes.updates)
+        holder = {"state": state}
+
+        def call() -> Any:
+            holder["state"], losses = run(holder["state"], batch, weights, hp, jax.random.key(3))
+            return losses
+
+        times = time_calls(call, b.sizes.repeats)
+        b.memo[memo_key] = summarize(times) | {
+            "matmul_dtype": cfg.matmul_dtype,
+            "updates_per_call": b.sizes.updates,
+            "updates_per_s": b.sizes.updates / statistics.median(times),
+        }
+    return b.memo[memo_key]
+
+
+def section_update(b: Bench) -> dict:
+    """Update-only rate at B=256, 2x256, obs 17, action 6: the compute ceiling of the real code."""
+    out = {}
+    for dtype_name in ("float32", "bfloat16"):
+        cfg = Config(hidden_sizes=PAPER_HIDDEN, batch_size=PAPER_BATCH, matmul_dtype=dtype_name)
+        r = updates_per_s(b, cfg, HC_OBS_DIM, HC_ACTION_DIM)
+        limit = limit_updates_per_s(b, cfg, HC_OBS_DIM, HC_ACTION_DIM)
+        out[dtype_name] = r | {
+            "limit_updates_per_s": limit,
+            "fraction_of_limit": r["updates_per_s"] / limit,
+        }
+    print_table(
+        f"update only, B=256, 2x256, {b.sizes.updates} scanned updates on a fixed batch",
+        ["matmul inputs", "updates/s", "ms/update", "limit updates/s", "fraction of limit"],
+        [
+            [
+                k,
+                v["updates_per_s"],
+                1e3 / v["updates_per_s"],
+                v["limit_updates_per_s"],
+                v["fraction_of_limit"],
+            ]
+            for k, v in out.items()
+        ],
+    )
+    return out
+
+
+# ---------------------------------------------------------------- 5. full trainer
+
+
+def trainer_config(sizes: Sizes, toy: bool, num_envs: int) -> Config:
+    """One warm-up period plus `timed_periods` timed ones, 1 update per env step, 1 eval episode.
+
+    The random warm-up (learning_starts = half a period) lies inside the first period, so every
+    timed period is pure training."""
+    period = sizes.period_env_steps
+    iters_per_eval = period // num_envs
+    fields: dict[str, Any] = dict(
+        num_envs=num_envs,
+        total_env_steps=(1 + sizes.timed_periods) * period,
+        eval_every=period,
+        learning_starts=period // 2,
+        replay_capacity=sizes.trainer_capacity,
+        num_eval_episodes=1,
+        traces_per_eval=math.gcd(10, iters_per_eval),
+        updates_per_env_step=1.0,
+        hidden_sizes=sizes.trainer_hidden,
+        batch_size=sizes.trainer_batch,
+    )
+    if toy:
+        fields |= dict(env_name="toy", episode_length=sizes.toy_episode_length)
+    return Config(**fields)
+
+
+def compile_trainer(trainer: Trainer, num_seeds: int) -> tuple[Any, Any, Any, dict[str, float]]:
+    """vmapped init and one-period `run_periods`, jitted as run.py does (static num_periods,
+    donated state). Returns the compiled chunk, state, hparams and the seconds of tracing and
+    lowering (`lower_s`, never cached) and of the XLA compile (`compile_s`, cacheable)."""
+    cfg = trainer.cfg
+    hps = broadcast_seeds(hparams_from_config(cfg), num_seeds)
+    keys = jax.random.split(jax.random.key(cfg.seed), num_seeds)
+    state = block(jax.jit(jax.vmap(trainer.init))(keys, hps))
+    run = jax.jit(
+        jax.vmap(trainer.run_periods, in_axes=(0, 0, None, None)),
+        static_argnums=3,
+        donate_argnums=0,
+    )
+    start = time.perf_counter()
+    lowered = run.lower(state, hps, jnp.int32(0), 1)
+    lowered_at = time.perf_counter()
+    compiled = lowered.compile()
+    seconds = {"lower_s": lowered_at - start, "compile_s": time.perf_counter() - lowered_at}
+    return compiled, state, hps, seconds
+
+
+def time_periods(trainer: Trainer, num_seeds: int, max_timed: int) -> dict:
+    """Compile, run the warm-up period, then time up to `max_timed` following periods."""
+    cfg = trainer.cfg
+    compiled, state, hps, seconds = compile_trainer(trainer, num_seeds)
+    start = time.perf_counter()
+    state, _ = block(compiled(state, hps, jnp.int32(0)))
+    warmup_s = time.perf_counter() - start
+    times = []
+    for p in range(1, min(cfg.num_evals, 1 + max_timed)):
+        start = time.perf_counter()
+        state, metrics = block(compiled(state, hps, jnp.int32(p)))
+        times.append(time.perf_counter() - start)
+    period_s = statistics.median(times)
+    updates = cfg.iters_per_eval * cfg.updates_per_iter * num_seeds
+    return summarize(times) | {
+        "num_seeds": num_seeds,
+        "num_envs": cfg.num_envs,
+        "lower_s": seconds["lower_s"],
+        "compile_s": seconds["lower_s"] + seconds["compile_s"],
+        "xla_compile_s": seconds["compile_s"],
+        "warmup_period_s": warmup_s,
+        "env_steps_per_period": cfg.eval_every * num_seeds,
+        "updates_per_period": updates,
+        "env_steps_per_s": cfg.eval_every * num_seeds / period_s,
+        "updates_per_s": updates / period_s,
+        "last_eval_return": float(jnp.mean(metrics.eval_return)),
+        "_actor_params": jax.tree.map(lambda x: x[0], state.agent.actor_params),
+    }
+
+
+def trainer_run(b: Bench, num_envs: int, num_seeds: int) -> dict:
+    """Timed trainer periods of the section's config (memoized: seeds reuses trainer's 1 x 1).
+
+    One seed times `timed_periods` periods; more seeds (N times the work) time one."""
+    memo_key = ("trainer", num_envs, num_seeds)
+    if memo_key not in b.memo:
+        cfg = trainer_config(b.sizes, b.toy_trainer, num_envs)
+        trainer = make_train(cfg)
+        max_timed = b.sizes.timed_periods if num_seeds == 1 else 1
+        b.memo[memo_key] = (trainer, time_periods(trainer, num_seeds, max_timed))
+    return b.memo[memo_key][1]
+
+
+def replay_scan(
+    per: PrioritizedReplay, cfg: Config, obs_dim: int, action_dim: int, iters: int
+) -> tuple[Callable[..., Any], Transition]:
+    """Jitted scan of the trainer's replay work: add num_envs items, then updates_per_iter x
+    (sample, set priorities from the sampled batch, so the gather is not optimized away)."""
+    example = example_transition(obs_dim, action_dim)
+
+    def one_sample(r: Any, k: jax.Array) -> tuple[Any, jax.Array]:
+        batch, idx, weights = per.sample(r, k, jnp.float32(0.5))
+        touch = batch.reward + batch.obs.sum(-1) + batch.next_obs.sum(-1) + batch.action.sum(-1)
+        r = per.set_priorities(r, idx, jnp.abs(touch) + 1e-3)
+        return r, jnp.sum(weights)
+
+    def iteration(r: Any, k: jax.Array) -> tuple[Any, jax.Array]:
+        k_item, k_sample = jax.random.split(k)
+        leaves, treedef = jax.tree.flatten(example)
+        ks = jax.random.split(k_item, len(leaves))
+        items = [
+            jax.random.normal(kk, (cfg.num_envs, *x.shape))
+            for kk, x in zip(ks, leaves, strict=True)
+        ]
+        r = per.add(r, jax.tree.unflatten(treedef, items))
+        r, w = jax.lax.scan(one_sample, r, jax.random.split(k_sample, cfg.updates_per_iter))
+        return r, jnp.sum(w)
+
+    def run(r: Any, key: jax.Array) -> tuple[Any, jax.Array]:
+        r, w = jax.lax.scan(iteration, r, jax.random.split(key, iters))
+        return r, jnp.sum(w)
+
+    return jax.jit(run, donate_argnums=0), example
+
+
+def replay_seconds_per_iteration(b: Bench, cfg: Config, obs_dim: int, action_dim: int) -> float:
+    """Replay-only seconds of one trainer iteration at `cfg`'s capacity, batch and env count."""
+    per = make_prioritized_replay(cfg.replay_capacity, cfg.batch_size, cfg.per_alpha)
+    iters = max(1, min(cfg.iters_per_eval, 200))
+    run, example = replay_scan(per, cfg, obs_dim, action_dim, iters)
+    holder = {"r": per.init(example)}
+
+    def call() -> Any:
+        holder["r"], w = run(holder["r"], jax.random.key(4))
+        return w
+
+    return statistics.median(time_calls(call, b.sizes.repeats)) / iters
+
+
+def evaluate_seconds(b: Bench, trainer: Trainer, actor_params: Any) -> float:
+    """Seconds of one `trainer.evaluate` (jitted alone, not vmapped, after a warm-up call)."""
+    evaluate = jax.jit(trainer.evaluate)
+    return statistics.median(
+        time_calls(lambda: evaluate(actor_params, jax.random.key(5)), b.sizes.repeats)
+    )
+
+
+def period_breakdown(b: Bench, trainer: Trainer, timing: dict) -> dict:
+    """Split one timed period into evaluation, env, updates, replay and the rest.
+
+    Each share is measured ALONE (evaluate jitted by itself; env-only, update-only and replay-only
+    scans at the same sizes) and scaled to one period; 'other' is the remainder (acting, query
+    bookkeeping, state samples, scan overhead) and can come out negative when the parts overlap."""
+    cfg = trainer.cfg
+    obs_dim, action_dim = trainer.obs_dim, trainer.action_dim
+    iters = cfg.iters_per_eval
+    parts = {
+        "evaluation": evaluate_seconds(b, trainer, timing["_actor_params"]),
+        "env": cfg.eval_every / env_steps_per_s(b, cfg.env_name, cfg.num_envs)["env_steps_per_s"],
+        "updates": iters
+        * cfg.updates_per_iter
+        / updates_per_s(b, cfg, obs_dim, action_dim)["updates_per_s"],
+        "replay": iters * replay_seconds_per_iteration(b, cfg, obs_dim, action_dim),
+    }
+    period_s = timing["median_s"]
+    parts["other"] = period_s - sum(parts.values())
+    return {
+        "seconds": parts,
+        "share": {k: v / period_s for k, v in parts.items()},
+        "method": "each part timed alone at the same sizes and scaled to one period; other = rest",
+    }
+
+
+def section_trainer(b: Bench) -> dict:
+    """The full trainer at 1 env (paper) and 16 envs, 1 update per env step, one period timed."""
+    out = {}
+    for num_envs in (1, 16):
+        timing = trainer_run(b, num_envs, 1)
+        trainer = b.memo[("trainer", num_envs, 1)][0]
+        cfg = trainer.cfg
+        breakdown = period_breakdown(b, trainer, timing)
+        eval_s = breakdown["seconds"]["evaluation"]
+        no_eval_s = timing["median_s"] - eval_s
+        limit = limit_updates_per_s(b, cfg, trainer.obs_dim, trainer.action_dim)
+        out[f"envs_{num_envs}"] = {k: v for k, v in timing.items() if not k.startswith("_")} | {
+            "env": cfg.env_name,
+            "hidden_sizes": list(cfg.hidden_sizes),
+            "batch_size": cfg.batch_size,
+            "replay_capacity": cfg.replay_capacity,
+            "updates_per_iteration": cfg.updates_per_iter,
+            "limit_updates_per_s": limit,
+            "fraction_of_limit": timing["updates_per_s"] / limit,
+            "without_eval_env_steps_per_s": cfg.eval_every / no_eval_s,
+            "without_eval_updates_per_s": timing["updates_per_period"] / no_eval_s,
+            "without_eval_fraction_of_limit": timing["updates_per_period"] / no_eval_s / limit,
+            "without_eval_method": "period time minus trainer.evaluate timed alone",
+            "breakdown": breakdown,
+        }
+    _print_trainer(out)
+    return out
+
+
+def _print_trainer(out: dict) -> None:
+    rows = []
+    for r in out.values():
+        rows.append(
+            [
+                f"{r['num_envs']} env(s), {r['updates_per_iteration']} upd/iter",
+                r["env_steps_per_s"],
+                r["updates_per_s"],
+                r["fraction_of_limit"],
+                r["without_eval_env_steps_per_s"],
+                r["without_eval_fraction_of_limit"],
+                r["compile_s"],
+            ]
+        )
+    env = next(iter(out.values()))["env"]
+    print_table(
+        f"full trainer ({env}), 1 update per env step, one timed period",
+        [
+            "config",
+            "env steps/s",
+            "updates/s",
+            "of limit",
+            "no-eval steps/s",
+            "no-eval of limit",
+            "compile s",
+        ],
+        rows,
+    )
+    shares = [
+        [f"{r['num_envs']} env(s)"]
+        + [r["breakdown"]["share"][k] for k in ("evaluation", "env", "updates", "replay", "other")]
+        for r in out.values()
+    ]
+    print_table(
+        "share of one period's time (each part timed alone, scaled to one period)",
+        ["config", "evaluation", "env", "updates", "replay", "other"],
+        shares,
+    )
+
+
+# ---------------------------------------------------------------- 6. vmapped seeds
+
+
+def section_seeds(b: Bench) -> dict:
+    """Total updates/s of N vmapped seeds (1 env each) against one seed run N times in a row."""
+    runs = {n: trainer_run(b, 1, n) for n in b.sizes.seed_counts}
+    single = runs[1]["updates_per_s"] if 1 in runs else float("nan")
+    out = {}
+    for n, r in runs.items():
+        out[f"seeds_{n}"] = {k: v for k, v in r.items() if not k.startswith("_")} | {
+            "total_updates_per_s": r["updates_per_s"],
+            "per_seed_updates_per_s": r["updates_per_s"] / n,
+            "speedup_vs_separate_runs": r["updates_per_s"] / single,
+            "slower_than_separate_runs": bool(r["updates_per_s"] < single),
+        }
+    print_table(
+        "vmapped seeds, 1 env each, 1 update per env step (separate runs = 1 seed's rate)",
+        ["seeds", "total updates/s", "per seed", "vs N separate runs", "slower?", "compile s"],
+        [
+            [
+                n,
+                r["total_updates_per_s"],
+                r["per_seed_updates_per_s"],
+                r["speedup_vs_separate_runs"],
+                "yes" if r["slower_than_separate_runs"] else "no",
+                r["compile_s"],
+            ]
+            for n, r in zip(runs, out.values(), strict=True)
+        ],
+    )
+    return out
+
+
+# ---------------------------------------------------------------- 7. cold / warm first step
+
+
+def first_step_child(args: argparse.Namespace) -> None:
+    """Child process: enable a persistent cache in `args.cache_dir`, build the 1-env trainer,
+    compile one period and run it; print the timings as one JSON line."""
+    jax.config.update("jax_compilation_cache_dir", args.cache_dir)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    try:
+        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    except AttributeError:  # option absent in this jax version
+        pass
+    sizes = QUICK if args.quick else FULL
+    t0 = time.perf_counter()
+    trainer = make_train(trainer_config(sizes, args.quick or args.skip_mjx, 1))
+    compiled, state, hps, seconds = compile_trainer(trainer, 1)
+    to_first_step = time.perf_counter() - t0
+    start = time.perf_counter()
+    block(compiled(state, hps, jnp.int32(0)))
+    result = {
+        "build_and_init_s": to_first_step - seconds["lower_s"] - seconds["compile_s"],
+        "lower_s": seconds["lower_s"],
+        "compile_s": seconds["compile_s"],
+        "to_first_step_s": to_first_step,
+        "first_chunk_run_s": time.perf_counter() - start,
+        "env": trainer.cfg.env_name,
+    }
+    print(CHILD_MARKER + json.dumps(result), flush=True)
+
+
+def run_child(b: Bench, cache_dir: str) -> dict:
+    """One first-step child process; wall seconds include interpreter start and imports."""
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--first-step-child", "--cache-dir"]
+    cmd += [cache_dir] + (["--quick"] if b.args.quick else [])
+    cmd += ["--skip-mjx"] if b.args.skip_mjx else []
+    start = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=3600)
+    wall = time.perf_counter() - start
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith(CHILD_MARKER)]
+    if proc.returncode or not lines:
+        raise RuntimeError(f"first-step child failed ({proc.returncode}): {proc.stderr[-2000:]}")
+    result = json.loads(lines[-1][len(CHILD_MARKER) :])
+    files = [p for p in Path(cache_dir).rglob("*") if p.is_file()]
+    return result | {
+        "wall_s": wall,
+        "wall_to_first_step_s": wall - result["first_chunk_run_s"],
+        "cache_files_after": len(files),
+        "cache_bytes_after": sum(p.stat().st_size for p in files),
+    }
+
+
+def section_first_step(b: Bench) -> dict:
+    """Cold (empty persistent cache) and warm (same cache again) time to the first chunk."""
+    cache_dir = tempfile.mkdtemp(prefix="arld_bench_cache_")
+    try:
+        cold = run_child(b, cache_dir)
+        warm = run_child(b, cache_dir)
+    finally:
+        shutil.rmtree(cache_dir, ignore_errors=True)
+    out = {"cold": cold, "warm": warm, "command": "bench.py --first-step-child (fresh subprocess)"}
+    print_table(
+        f"time to first training step, 1 env ({cold['env']}), fresh subprocess",
+        [
+            "cache",
+            "wall to 1st step s",
+            "trace+lower s",
+            "XLA compile s",
+            "build+init s",
+            "1st chunk run s",
+            "wall s",
+        ],
+        [
+            [
+                name,
+                r["wall_to_first_step_s"],
+                r["lower_s"],
+                r["compile_s"],
+                r["build_and_init_s"],
+                r["first_chunk_run_s"],
+                r["wall_s"],
+            ]
+            for name, r in (("cold", cold), ("warm", warm))
+        ],
+    )
+    return out
+
+
+# ---------------------------------------------------------------- 8. memory
+
+
+def section_memory(b: Bench) -> dict:
+    """Replay and whole-TrainState bytes per seed at capacity 1M, from `jax.eval_shape` (nothing
+    of that size is allocated; a 1000-item buffer checks the count against `replay_nbytes`)."""
+    capacity = 1_000_000
+    per = make_prioritized_replay(capacity, PAPER_BATCH, 0.6)
+    example = example_transition(HC_OBS_DIM, HC_ACTION_DIM)
+    replay_bytes = tree_nbytes(jax.eval_shape(per.init, example))
+    small = make_prioritized_replay(1000, PAPER_BATCH, 0.6)
+    small_check = replay_nbytes(small.init(example)) == tree_nbytes(
+        jax.eval_shape(small.init, example)
+    )
+    env_name = "toy" if b.args.skip_mjx else "halfcheetah"
+    cfg = Config(env_name=env_name, replay_capacity=capacity)
+    trainer = make_train(cfg)
+    shapes = jax.eval_shape(trainer.init, jax.random.key(0), hparams_from_config(cfg))
+    parts = {name: tree_nbytes(getattr(shapes, name)) for name in shapes.__dataclass_fields__}
+    total = sum(parts.values())
+    mem_total = _mem_total_bytes()
+    out = {
+        "capacity": capacity,
+        "replay_bytes_obs17_act6": replay_bytes,
+        "replay_nbytes_agrees_on_small_buffer": small_check,
+        "train_state_env": env_name,
+        "train_state_bytes": total,
+        "train_state_parts_bytes": parts,
+        "machine_memory_bytes": mem_total,
+        "seeds_fitting_in_memory": mem_total // total if mem_total else None,
+        "method": "jax.eval_shape (no allocation); bytes = sum of prod(shape) * itemsize",
+    }
+    mib = 2**20
+    rows = [["replay (obs 17, action 6)", replay_bytes / mib]]
+    rows += [[f"TrainState ({env_name}) total", total / mib]]
+    rows += [[f"  {k}", v / mib] for k, v in parts.items() if v >= mib // 100]
+    print_table(f"memory per seed at replay capacity {capacity:,}", ["what", "MiB"], rows)
+    return out
+
+
+def _mem_total_bytes() -> int | None:
+    """MemTotal of /proc/meminfo, if there is one."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemTotal:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
+
+
+# ---------------------------------------------------------------- summary
+
+
+def _get(sections: dict, *path: str) -> Any:
+    """sections[path[0]][path[1]]..., or nan when a section was skipped or failed."""
+    node: Any = sections
+    for p in path:
+        if not isinstance(node, dict) or p not in node:
+            return float("nan")
+        node = node[p]
+    return node
+
+
+def print_summary(sections: dict) -> None:
+    """The headline figures of every section that ran, in one table."""
+    g = lambda *path: _get(sections, *path)
+    env_rows = [
+        [f"env only {k.replace('_', ', ')} env(s), env steps/s", v["env_steps_per_s"]]
+        for k, v in sections.get("env", {}).items()
+        if isinstance(v, dict) and "env_steps_per_s" in v
+    ]
+    seed_rows = [
+        [
+            f"{k.replace('_', ' ')} vmapped: total updates/s (x separate)",
+            f"{v['total_updates_per_s']:,.0f} ({v['speedup_vs_separate_runs']:.2f}x)",
+        ]
+        for k, v in sections.get("seeds", {}).items()
+        if isinstance(v, dict) and "total_updates_per_s" in v
+    ]
+    rows = [
+        ["matmul f32 256-wide, GFLOP/s (best)", g("flops", "matmul_gflops_f32_best")],
+        ["matmul bf16-in/f32-acc 256-wide, GFLOP/s (best)", g("flops", "matmul_gflops_bf16_best")],
+        ["one update B=256 2x256, GFLOP (XLA)", g("flops", "xla_cost_analysis_flops") / 1e9],
+        [
+            "one update B=256 2x256, GFLOP (analytic)",
+            g("flops", "analytic_matmul_flops", "total") / 1e9,
+        ],
+        ["physical limit f32, updates/s", g("flops", "limit_updates_per_s_f32")],
+        *env_rows,
+        ["update only f32, updates/s", g("update", "float32", "updates_per_s")],
+        ["update only bf16, updates/s", g("update", "bfloat16", "updates_per_s")],
+        ["trainer 1 env: env steps/s", g("trainer", "envs_1", "env_steps_per_s")],
+        ["trainer 1 env: fraction of limit", g("trainer", "envs_1", "fraction_of_limit")],
+        ["trainer 16 envs: env steps/s", g("trainer", "envs_16", "env_steps_per_s")],
+        ["trainer 16 envs: fraction of limit", g("trainer", "envs_16", "fraction_of_limit")],
+        *seed_rows,
+        ["first step cold, wall s", g("first_step", "cold", "wall_to_first_step_s")],
+        ["first step warm, wall s", g("first_step", "warm", "wall_to_first_step_s")],
+        ["replay at 1M, MiB/seed", g("memory", "replay_bytes_obs17_act6") / 2**20],
+        ["TrainState at 1M, MiB/seed", g("memory", "train_state_bytes") / 2**20],
+    ]
+    ran = [r for r in rows if not (isinstance(r[1], float) and math.isnan(r[1]))]
+    print_table("summary (sections that ran)", ["figure", "value"], ran)
+
+
+# ---------------------------------------------------------------- driver
+
+
+SECTION_FUNCS: dict[str, Callable[[Bench], dict]] = {
+    "matmul": section_matmul,
+    "flops": section_flops,
+    "env": section_env,
+    "update": section_update,
+    "trainer": section_trainer,
+    "seeds": section_seeds,
+    "first_step": section_first_step,
+    "memory": section_memory,
+}
+
+
+def run_section(b: Bench, name: str) -> None:
+    """Run one section, record its result and wall time, and rewrite the JSON report."""
+    log(f"\n>>> {name} ...")
+    start = time.perf_counter()
+    try:
+        result = SECTION_FUNCS[name](b)
+    except Exception as err:  # keep the other sections' figures
+        log(f"!!! section {name} failed: {type(err).__name__}: {err}")
+        result = {"error": f"{type(err).__name__}: {err}"}
+    result["section_wall_s"] = time.perf_counter() - start
+    b.report["sections"][name] = result
+    b.save()
+    log(f"<<< {name} done in {result['section_wall_s']:.1f} s (saved {b.out})")
+
+
+def default_out(quick: bool) -> Path:
+    """benchmarks/results/<host or 'cpu'>-<date>[-quick].json"""
+    host = socket.gethostname() or "cpu"
+    date = datetime.date.today().isoformat()
+    return RESULTS_DIR / f"{host}-{date}{'-quick' if quick else ''}.json"
+
+
+def parse_args(argv: Sequence[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="tiny sizes; toy env for the trainer")
+    parser.add_argument("--skip-mjx", action="store_true", help="toy env everywhere, no MJX")
+    parser.add_argument("--out", type=Path, default=None, help="JSON report path")
+    parser.add_argument(
+        "--only", default=None, help=f"comma-separated sections: {', '.join(SECTIONS)}"
+    )
+    parser.add_argument("--first-step-child", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--cache-dir", default=None, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.only:
+        unknown = set(args.only.split(",")) - set(SECTIONS)
+        if unknown:
+            parser.error(f"unknown section(s) {sorted(unknown)}; choose from {', '.join(SECTIONS)}")
+    return args
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    args = parse_args(sys.argv[1:] if argv is None else argv)
+    if args.first_step_child:
+        first_step_child(args)
+        return
+    selected = [s for s in SECTIONS if not args.only or s in args.only.split(",")]
+    b = Bench(
+        args=args,
+        sizes=QUICK if args.quick else FULL,
+        out=args.out or default_out(args.quick),
+        report={"meta": machine_info(args), "sections": {}},
+    )
+    meta = b.report["meta"]
+    log(f"arld_jax benchmark ({meta['mode']}): {meta['cpu_model']}, {meta['cpu_count']} cores")
+    log(f"jax {meta['versions']['jax']}, brax {meta['versions']['brax']}; report: {b.out}")
+    load = meta["load_average_at_start"][0]
+    if load > 0.5 * (meta["cpus_usable"] or 1):
+        log(f"WARNING: load average {load:.1f} at start: the machine is busy, figures will be low")
+    start = time.perf_counter()
+    for name in selected:
+        if name not in b.report["sections"]:  # matmul may have run already as a dependency
+            run_section(b, name)
+    meta["load_average_at_end"] = list(os.getloadavg())
+    meta["total_wall_s"] = time.perf_counter() - start
+    b.save()
+    print_summary(b.report["sections"])
+    log(f"\ndone in {meta['total_wall_s']:.0f} s; report written to {b.out}")
+
+
+if __name__ == "__main__":
+    main()

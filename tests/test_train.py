@@ -1,0 +1,166 @@
+"""The scanned loop on the toy env: learning, seeds under vmap, one trace, expert queries in the loop."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from arld_jax import query
+from arld_jax.config import hparams_from_config, tiny
+from arld_jax.envs import toy_target_action
+from arld_jax.expert import Expert
+from arld_jax.train import make_train
+
+TOY_EXPERT = Expert(params={}, act=lambda p, obs, k: toy_target_action(obs), meta={"name": "toy"})
+SEEDS = (0, 1, 2)
+
+
+def _stack(hps):
+    return jax.tree.map(lambda *xs: jnp.stack(xs), *hps)
+
+
+@pytest.fixture(scope="session")
+def toy_sweep():
+    """One compiled program: 3 strategies x 3 seeds of the tiny toy config with the toy expert."""
+    cfg = tiny(budget=150, demo_steps=3, query_prob=0.2, t_query=0.2)
+    trainer = make_train(cfg, TOY_EXPERT)
+    strategies = ("none", "greedy", "bernoulli", "active")
+    configs = [cfg.replace(strategy=s, seed=k) for s in strategies for k in SEEDS]
+    hps = _stack([hparams_from_config(c) for c in configs])
+    keys = jnp.stack([jax.random.key(c.seed) for c in configs])
+    state, metrics = jax.jit(jax.vmap(trainer.train))(keys, hps)
+    return cfg, trainer, configs, state, metrics
+
+
+def test_eval_return_improves_over_untrained_start(toy_sweep):
+    cfg, trainer, configs, state, metrics = toy_sweep
+    plain = [i for i, c in enumerate(configs) if c.strategy == "none"]
+    untrained = jax.vmap(trainer.init)(
+        jnp.stack([jax.random.key(configs[i].seed) for i in plain]),
+        _stack([hparams_from_config(configs[i]) for i in plain]),
+    )
+    start = jax.vmap(trainer.evaluate)(
+        untrained.agent.actor_params, jax.random.split(jax.random.key(9), len(plain))
+    )
+    final = np.asarray(metrics.eval_return)[plain, -1]
+    # Toy env: best policy earns 1 per step (50 per episode), a random-ish start well below.
+    assert np.all(final > np.asarray(start) + 5.0), (final, start)
+    assert np.all(final > 0.85 * cfg.episode_length)
+    # Losses are finite and the critic fits: last-period loss below the first learning period's.
+    critic = np.asarray(metrics.critic_loss)[plain]
+    assert np.all(np.isfinite(critic)) and np.all(critic[:, -1] < critic[:, 0])
+
+
+def test_vmapped_seed_equals_single_run():
+    """Seed k inside a vmapped sweep = a single run with seed k, to float tolerance. The horizon is
+    short on purpose: batched matmuls round differently, and RL training amplifies any difference
+    chaotically over thousands of updates (bit-equality is not on offer from XLA)."""
+    cfg = tiny(total_env_steps=600, eval_every=300, learning_starts=100, budget=60, demo_steps=2)
+    trainer = make_train(cfg, TOY_EXPERT)
+    configs = [cfg.replace(strategy=s, seed=k) for s, k in (("active", 0), ("greedy", 1), ("none", 2))]
+    hps = _stack([hparams_from_config(c) for c in configs])
+    keys = jnp.stack([jax.random.key(c.seed) for c in configs])
+    state, metrics = jax.jit(jax.vmap(trainer.train))(keys, hps)
+    i = 1
+    single_state, single = jax.jit(trainer.train)(
+        jax.random.key(configs[i].seed), hparams_from_config(configs[i])
+    )
+    for name in ("eval_return", "critic_loss", "demos_used", "uncertainty_trace"):
+        np.testing.assert_allclose(
+            np.asarray(getattr(metrics, name))[i],
+            np.asarray(getattr(single, name)),
+            rtol=1e-3,
+            atol=1e-3,
+            err_msg=name,
+        )
+    np.testing.assert_allclose(
+        np.asarray(state.replay.data.action)[i],
+        np.asarray(single_state.replay.data.action),
+        atol=1e-3,
+    )
+    # And the runs really differ from each other (the comparison is not vacuous).
+    assert not np.allclose(np.asarray(metrics.eval_return)[0], np.asarray(metrics.eval_return)[1])
+
+
+def test_budget_and_demo_flags_in_the_loop(toy_sweep):
+    cfg, trainer, configs, state, metrics = toy_sweep
+    demos = np.asarray(metrics.demos_used)[:, -1]
+    data = state.replay.data
+    is_demo = np.asarray(data.is_demo) > 0.5  # [runs, capacity]; capacity == total steps here
+    for i, c in enumerate(configs):
+        assert demos[i] <= cfg.budget
+        assert is_demo[i].sum() == demos[i]
+        if c.strategy == "none":
+            assert demos[i] == 0
+        if c.strategy == "greedy":
+            # Greedy spends the budget first and exactly: with 2 envs and C-step runs, only the last
+            # run may be cut short, so demos fill the start of the replay (envs interleave in it).
+            slack = cfg.num_envs * cfg.demo_steps
+            assert demos[i] == cfg.budget
+            assert is_demo[i, : cfg.budget - slack].all()
+            assert not is_demo[i, cfg.budget + slack :].any()
+    # Where the mask is set the stored (executed) action is the expert's, elsewhere the agent's.
+    obs, action = np.asarray(data.obs), np.asarray(data.action)
+    expert = np.asarray(toy_target_action(jnp.asarray(obs)))
+    np.testing.assert_allclose(action[is_demo], expert[is_demo], atol=1e-5)
+    agent_steps = ~is_demo & (np.arange(cfg.replay_capacity) >= cfg.learning_starts)
+    assert np.mean(np.abs(action[agent_steps] - expert[agent_steps]).max(-1) > 1e-3) > 0.5
+
+
+def test_query_rates_in_the_loop(toy_sweep):
+    cfg, trainer, configs, state, metrics = toy_sweep
+    queries = np.asarray(metrics.queries).sum(1)
+    for i, c in enumerate(configs):
+        if c.strategy == "bernoulli":
+            # Until the budget binds, a query starts at a free decision step with probability b.
+            assert queries[i] > 0
+        if c.strategy == "active":
+            assert queries[i] > 0
+    # Uncertainty traces are recorded and finite; sigma decreases as SAC learns the toy task.
+    trace = np.asarray(metrics.uncertainty_trace)
+    assert trace.shape == (len(configs), cfg.num_evals, cfg.traces_per_eval)
+    assert np.all(np.isfinite(trace))
+
+
+def test_state_samples_hold_visited_and_queried_states(toy_sweep):
+    cfg, trainer, configs, state, metrics = toy_sweep
+    valid_visited = np.asarray(state.visited.key) >= 0
+    valid_queried = np.asarray(state.queried.key) >= 0
+    assert valid_visited.all()  # 2,000 visited states >> 32 slots
+    for i, c in enumerate(configs):
+        if c.strategy == "none":
+            assert not valid_queried[i].any()
+        else:
+            assert valid_queried[i].any()
+    # Samples are spread over the run, not just its end (uniform reservoir).
+    steps = np.asarray(state.visited.env_step)[0]
+    assert steps.min() < cfg.total_env_steps / 4 and steps.max() > cfg.total_env_steps * 3 / 4
+
+
+def test_run_periods_traces_once():
+    cfg = tiny(total_env_steps=1_000, eval_every=250, learning_starts=100)
+    trainer = make_train(cfg)
+    traces = []
+
+    def counted(state, hp, first):
+        traces.append(1)
+        return trainer.run_periods(state, hp, first, 1)
+
+    run = jax.jit(counted)
+    hp = hparams_from_config(cfg)
+    state = trainer.init(jax.random.key(0), hp)
+    for p in range(cfg.num_evals):
+        state, m = run(state, hp.replace(critic_lr=hp.critic_lr * (p + 1)), jnp.int32(p))
+    assert len(traces) == 1
+    assert int(m.env_steps[-1]) == cfg.total_env_steps
+
+
+def test_no_expert_refuses_query_strategies():
+    cfg = tiny(total_env_steps=1_000, eval_every=500)
+    trainer = make_train(cfg)
+    hp = hparams_from_config(cfg.replace(strategy="active"))
+    with pytest.raises(ValueError, match="needs an expert"):
+        trainer.train(jax.random.key(0), hp)
+    assert query.NONE == 0
