@@ -55,6 +55,19 @@ def save_expert(path: str | Path, actor_params: Params, meta: dict[str, Any]) ->
     return path
 
 
+def read_expert_meta(path: str | Path) -> dict[str, Any]:
+    """The expert's metadata; FileNotFoundError (saying how to get one) if no expert is there."""
+    path = Path(path).absolute()
+    meta_file = path / META_FILE
+    if not meta_file.is_file() or not (path / PARAMS_DIR).is_dir():
+        raise FileNotFoundError(
+            f"No expert at {path}: expected {META_FILE} and {PARAMS_DIR}/ there. Train one with "
+            "`python -m arld_jax.run train_expert`, or pass --expert_path experiments/expert "
+            "(the shipped HalfCheetah expert)."
+        )
+    return json.loads(meta_file.read_text())
+
+
 def load_expert(
     path: str | Path, obs_dim: int, action_dim: int, stochastic: bool = False
 ) -> Expert:
@@ -64,14 +77,7 @@ def load_expert(
     import orbax.checkpoint as ocp
 
     path = Path(path).absolute()
-    meta_file = path / META_FILE
-    if not meta_file.is_file() or not (path / PARAMS_DIR).is_dir():
-        raise FileNotFoundError(
-            f"No expert at {path}: expected {META_FILE} and {PARAMS_DIR}/ there. Train one with "
-            "`python -m arld_jax.run train_expert`, or pass expert_path=experiments/expert "
-            "(the shipped HalfCheetah expert)."
-        )
-    meta = json.loads(meta_file.read_text())
+    meta = read_expert_meta(path)
     if (meta.get("obs_dim"), meta.get("action_dim")) != (obs_dim, action_dim):
         raise ValueError(
             f"Expert at {path} was trained for obs_dim={meta.get('obs_dim')}, "

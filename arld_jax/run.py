@@ -385,7 +385,7 @@ def run_sweep(
 
 def _expert_for(cfg: Config):  # noqa: ANN202
     from arld_jax.envs import make_env, toy_target_action
-    from arld_jax.expert import Expert, load_expert
+    from arld_jax.expert import Expert, load_expert, read_expert_meta
 
     if cfg.env_name == "toy" and cfg.expert_path is None:
         # The toy env's optimal policy is known in closed form: it is the toy expert.
@@ -395,8 +395,9 @@ def _expert_for(cfg: Config):  # noqa: ANN202
             "error: a query strategy other than 'none' needs an expert: set --expert_path "
             f"(the shipped HalfCheetah expert is {SHIPPED_EXPERT})"
         )
-    env = make_env(cfg)
     try:
+        read_expert_meta(cfg.expert_path)  # fail fast, before building the env
+        env = make_env(cfg)
         return load_expert(cfg.expert_path, env.obs_dim, env.action_dim, cfg.expert_stochastic)
     except (FileNotFoundError, ValueError) as err:
         raise SystemExit(f"error: {err}") from None
@@ -503,7 +504,9 @@ def train_expert(args: argparse.Namespace, sweep: Sweep, argv: list[str]) -> Pat
         "train_env_steps": cfg.total_env_steps,
         "eval_return": float(final[best]),
         "eval_episodes": cfg.num_eval_episodes,
-        "final_eval_return_all_seeds": {str(s): float(r) for s, r in zip(sweep.seeds, final)},
+        "final_eval_return_all_seeds": {
+            str(s): float(r) for s, r in zip(sweep.seeds, final, strict=True)
+        },
         "command": "python -m arld_jax.run " + " ".join(argv),
     }
     path = save_expert(out, actor, meta)

@@ -59,7 +59,9 @@ def test_vmapped_seed_equals_single_run():
     chaotically over thousands of updates (bit-equality is not on offer from XLA)."""
     cfg = tiny(total_env_steps=600, eval_every=300, learning_starts=100, budget=60, demo_steps=2)
     trainer = make_train(cfg, TOY_EXPERT)
-    configs = [cfg.replace(strategy=s, seed=k) for s, k in (("active", 0), ("greedy", 1), ("none", 2))]
+    configs = [
+        cfg.replace(strategy=s, seed=k) for s, k in (("active", 0), ("greedy", 1), ("none", 2))
+    ]
     hps = _stack([hparams_from_config(c) for c in configs])
     keys = jnp.stack([jax.random.key(c.seed) for c in configs])
     state, metrics = jax.jit(jax.vmap(trainer.train))(keys, hps)
