@@ -18,7 +18,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from arld_jax.config import SWEEPABLE, Config, HParams, hparams_from_config
+from arld_jax.config import STRATEGIES, SWEEPABLE, Config, HParams, hparams_from_config
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SHIPPED_EXPERT = REPO_ROOT / "experiments" / "expert"
@@ -111,23 +111,42 @@ def _arld_cells(**extra: tuple[Any, ...]) -> dict[str, tuple[Any, ...]]:
     return cells
 
 
-def preset_default() -> Sweep:
-    """~10 min on a 2-core CPU: all 4 strategies x both uncertainty measures, 2 seeds, 10k env steps
-    of MJX HalfCheetah with budget 1,000 and N_r 1,000 (a scaled-down paper protocol)."""
-    cfg = Config(
-        total_env_steps=10_000,
+def _cpu_arld_config(**overrides: Any) -> Config:
+    """The CPU-sized ARLD protocol shared by the `default` and `experiment` presets.
+
+    A scaled-down paper protocol: MJX HalfCheetah, paper networks (2x256), batch 256, alpha 0.2,
+    prioritized replay with demo bonus; 2 envs per run with one update per iteration (0.5 updates
+    per env step: on a 2-core CPU the updates are the whole cost, see benchmarks/), 1,000 warm-up
+    steps, budget 1,500 demonstrated steps, N_r = 1,000, b = 0.1, t_query = 0.1 (the paper's best
+    values), C = 5."""
+    base: dict[str, Any] = dict(
+        num_envs=2,
+        updates_per_env_step=0.5,
         learning_starts=1_000,
-        eval_every=1_000,
         num_eval_episodes=2,
-        replay_capacity=10_000,
-        budget=1_000,
+        budget=1_500,
         window_size=1_000,
         query_prob=0.1,
         t_query=0.1,
         demo_steps=5,
         expert_path=str(SHIPPED_EXPERT),
     )
-    return Sweep(cfg=cfg, sweep=_arld_cells(), seeds=(0, 1))
+    base.update(overrides)
+    return Config(**base)
+
+
+def preset_default() -> Sweep:
+    """~10 min on a 2-core CPU: SAC vs GQSAC vs BQSAC vs AQSAC (intrinsic sigma), 3 seeds, 8k env
+    steps of MJX HalfCheetah (the CPU protocol of experiments/, shorter)."""
+    cfg = _cpu_arld_config(total_env_steps=8_000, eval_every=1_000, replay_capacity=8_000)
+    return Sweep(cfg=cfg, sweep={"strategy": STRATEGIES}, seeds=(0, 1, 2))
+
+
+def preset_experiment() -> Sweep:
+    """The committed CPU experiment: 4 strategies x 2 uncertainty measures x 5 seeds, 12k env steps
+    (about an hour on a 2-core CPU)."""
+    cfg = _cpu_arld_config(total_env_steps=12_000, eval_every=1_500, replay_capacity=12_000)
+    return Sweep(cfg=cfg, sweep=_arld_cells(), seeds=(0, 1, 2, 3, 4))
 
 
 def preset_sac() -> Sweep:
@@ -168,6 +187,7 @@ def preset_tiny() -> Sweep:
 
 SWEEP_PRESETS = {
     "default": preset_default,
+    "experiment": preset_experiment,
     "sac": preset_sac,
     "paper": preset_paper,
     "tiny": preset_tiny,
