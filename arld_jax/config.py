@@ -282,6 +282,8 @@ def validate(cfg: Config) -> None:
         _fail("hidden_sizes", cfg.hidden_sizes, "a non-empty tuple of integers >= 1")
     if cfg.batch_size > cfg.replay_capacity:
         _fail("batch_size", cfg.batch_size, f"<= replay_capacity ({cfg.replay_capacity})")
+    if cfg.window_size < cfg.num_envs:
+        _fail("window_size", cfg.window_size, f">= num_envs ({cfg.num_envs})")
     if cfg.num_envs > cfg.replay_capacity:
         _fail("num_envs", cfg.num_envs, f"<= replay_capacity ({cfg.replay_capacity})")
     if cfg.eval_every % cfg.num_envs:
@@ -307,9 +309,9 @@ def validate(cfg: Config) -> None:
             cfg.updates_per_env_step,
             f"> 0 with updates_per_env_step * num_envs ({cfg.num_envs}) a whole number",
         )
-    if cfg.log_std_min >= cfg.log_std_max:
+    if not cfg.log_std_min < cfg.log_std_max:
         _fail("log_std_min", cfg.log_std_min, f"< log_std_max ({cfg.log_std_max})")
-    if cfg.noisy_sigma_init < 0:
+    if not cfg.noisy_sigma_init >= 0:
         _fail("noisy_sigma_init", cfg.noisy_sigma_init, ">= 0")
     for name in ("actor_lr", "critic_lr", "alpha_lr", "reward_scale", "init_alpha"):
         if not getattr(cfg, name) > 0:
@@ -318,13 +320,13 @@ def validate(cfg: Config) -> None:
         _fail("gamma", cfg.gamma, "0 <= gamma < 1")
     if not 0 < cfg.tau <= 1:
         _fail("tau", cfg.tau, "0 < tau <= 1")
-    if cfg.per_alpha < 0:
+    if not cfg.per_alpha >= 0:
         _fail("per_alpha", cfg.per_alpha, ">= 0")
     if not 0 <= cfg.per_beta0 <= 1:
         _fail("per_beta0", cfg.per_beta0, "0 <= per_beta0 <= 1")
     if not cfg.per_eps > 0:
         _fail("per_eps", cfg.per_eps, "> 0")
-    if cfg.eps_demo < 0:
+    if not cfg.eps_demo >= 0:
         _fail("eps_demo", cfg.eps_demo, ">= 0")
     if not 0 <= cfg.query_prob <= 1:
         _fail("query_prob", cfg.query_prob, "0 <= b <= 1")

@@ -473,17 +473,8 @@ def train_expert(args: argparse.Namespace, sweep: Sweep, argv: list[str]) -> Pat
     sweep = dataclasses.replace(sweep, cfg=sweep.cfg.replace(strategy="none"))
     out = Path(args.out) if args.out else SHIPPED_EXPERT
     run_dir = out / "training"
-    result = run_sweep(
-        sweep,
-        run_dir,
-        args.chunk_periods,
-        args.stop_after_chunks,
-        command="python -m arld_jax.run " + " ".join(argv),
-        preset=args.preset,
-        plots=not args.no_plots,
-    )
+    result = _run_from_args(args, sweep, run_dir, argv)
     if not result["complete"]:
-        print(f"stopped early; rerun the same command to resume ({run_dir})")
         return run_dir
     import jax
 
@@ -528,7 +519,13 @@ def main(argv: list[str] | None = None) -> None:
         train_expert(args, sweep, argv)
         return
     out = Path(args.out) if args.out else _default_out(args.command, args.preset)
-    print(f"output directory: {out}")
+    _run_from_args(args, sweep, out, argv)
+
+
+def _run_from_args(
+    args: argparse.Namespace, sweep: Sweep, out: Path, argv: list[str]
+) -> dict[str, Any]:
+    print(f"output directory: {out}", flush=True)
     result = run_sweep(
         sweep,
         out,
@@ -537,10 +534,13 @@ def main(argv: list[str] | None = None) -> None:
         command="python -m arld_jax.run " + " ".join(argv),
         preset=args.preset,
         plots=not args.no_plots,
+        log=lambda *a: print(*a, flush=True),
     )
-    if not result["complete"]:
+    if result["complete"]:
+        print(f"results in {out}")
+    else:
         print(f"stopped before the end; rerun the same command to resume: {out}")
-    print(f"results in {out}")
+    return result
 
 
 def _enable_compilation_cache() -> None:
