@@ -164,6 +164,12 @@ def build_parser() -> argparse.ArgumentParser:
             )
     plot = sub.add_parser("plot", help="(re)draw figures and summary of a run directory")
     plot.add_argument("run_dir")
+    export = sub.add_parser(
+        "export_expert",
+        help="save the best run's actor from the latest checkpoint of a plain-SAC run as the expert",
+    )
+    export.add_argument("run_dir")
+    export.add_argument("--out", default=None, help=f"expert directory (default {SHIPPED_EXPERT})")
     return parser
 
 
@@ -183,7 +189,7 @@ def parse_args(argv: list[str]) -> tuple[argparse.Namespace, Sweep | None]:
             else:
                 msgs.append(f"unexpected argument {u!r}")
         parser.error("; ".join(msgs) + ". See --help for every field.")
-    if args.command == "plot":
+    if args.command in ("plot", "export_expert"):
         return args, None
     overrides = {
         n: getattr(args, n)
@@ -464,10 +470,7 @@ def _write_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
 
 
 def train_expert(args: argparse.Namespace, sweep: Sweep, argv: list[str]) -> Path:
-    """Train plain SAC over seeds; save the best seed's actor as the expert."""
-    from arld_jax.envs import make_env
-    from arld_jax.expert import save_expert
-
+    """Train plain SAC over seeds, then save the best seed's actor as the expert."""
     if sweep.sweep:
         raise SystemExit("error: train_expert takes no swept fields (only --seeds)")
     sweep = dataclasses.replace(sweep, cfg=sweep.cfg.replace(strategy="none"))
@@ -476,13 +479,47 @@ def train_expert(args: argparse.Namespace, sweep: Sweep, argv: list[str]) -> Pat
     result = _run_from_args(args, sweep, run_dir, argv)
     if not result["complete"]:
         return run_dir
-    import jax
+    return export_expert(run_dir, out)
 
-    final = result["metrics"]["eval_return"][:, -1]
-    best = int(np.argmax(final))
-    actor = jax.tree.map(lambda x: np.asarray(x[best]), result["state"].agent.actor_params)
-    env = make_env(sweep.cfg)
-    cfg = sweep.cfg
+
+def export_expert(run_dir: Path, out: Path) -> Path:
+    """Save, as the expert, the actor of the run with the best latest evaluation return in the
+    latest checkpoint of `run_dir` (a finished or a still-running plain-SAC run)."""
+    import jax
+    import orbax.checkpoint as ocp
+
+    from arld_jax.envs import make_env
+    from arld_jax.expert import save_expert
+    from arld_jax.train import make_train
+
+    saved = json.loads((run_dir / "config.json").read_text())
+    cfg_dict = dict(saved["config"], hidden_sizes=tuple(saved["config"]["hidden_sizes"]))
+    cfg = Config(**cfg_dict)
+    mngr = ocp.CheckpointManager((run_dir / CHECKPOINT_DIR).absolute())
+    step = mngr.latest_step()
+    if step is None:
+        raise SystemExit(f"error: {run_dir} has no checkpoint yet")
+    restored = mngr.restore(step, args=ocp.args.StandardRestore())
+    # Which flat leaves are the actor's: the structure of one run's TrainState (no compile).
+    trainer = make_train(cfg)
+    hp = config_mod.hparams_from_config(cfg)
+    template = jax.eval_shape(trainer.init, jax.random.key(0), hp)
+    flat, _ = jax.tree_util.tree_flatten_with_path(template)
+    actor_leaves = {}
+    for i, (path, _) in enumerate(flat):
+        keys = jax.tree_util.keystr(path)
+        if keys.startswith(".agent.actor_params"):
+            actor_leaves[i] = np.asarray(restored[f"{i:05d}"])
+    metrics = np.load(run_dir / METRICS_FILE)
+    periods = metrics["eval_return"].shape[1]
+    latest = metrics["eval_return"][:, periods - 1]
+    best = int(np.nanargmax(latest))
+    actor_flat = [actor_leaves[i][best] for i in sorted(actor_leaves)]
+    actor_template = template.agent.actor_params
+    actor = jax.tree.unflatten(jax.tree.structure(actor_template), actor_flat)
+    env = make_env(cfg)
+    runs = json.loads((run_dir / "runs.json").read_text())
+    env_steps = int(metrics["env_steps"][best, periods - 1])
     meta = {
         "env_name": cfg.env_name,
         "backend": cfg.backend,
@@ -491,23 +528,33 @@ def train_expert(args: argparse.Namespace, sweep: Sweep, argv: list[str]) -> Pat
         "hidden_sizes": list(cfg.hidden_sizes),
         "log_std_min": cfg.log_std_min,
         "log_std_max": cfg.log_std_max,
-        "seed": sweep.seeds[best],
-        "train_env_steps": cfg.total_env_steps,
-        "eval_return": float(final[best]),
+        "seed": runs[best]["seed"],
+        "train_env_steps": env_steps,
+        "run_total_env_steps": cfg.total_env_steps,
+        "checkpoint_step": step,
+        "eval_return": float(latest[best]),
         "eval_episodes": cfg.num_eval_episodes,
-        "final_eval_return_all_seeds": {
-            str(s): float(r) for s, r in zip(sweep.seeds, final, strict=True)
+        "eval_return_all_runs": {
+            f"run {r['run']} ({r['cell_label']}, seed {r['seed']})": float(ret)
+            for r, ret in zip(runs, latest, strict=True)
         },
-        "command": "python -m arld_jax.run " + " ".join(argv),
+        "training_command": saved.get("command"),
+        "training_run": str(run_dir),
     }
     path = save_expert(out, actor, meta)
-    print(f"expert (seed {meta['seed']}, eval return {meta['eval_return']:.1f}) saved to {path}")
+    print(
+        f"expert (seed {meta['seed']}, {env_steps:,} env steps, eval return "
+        f"{meta['eval_return']:.1f}) saved to {path}"
+    )
     return path
 
 
 def main(argv: list[str] | None = None) -> None:
     argv = list(sys.argv[1:] if argv is None else argv)
     args, sweep = parse_args(argv)
+    if args.command == "export_expert":
+        export_expert(Path(args.run_dir), Path(args.out) if args.out else SHIPPED_EXPERT)
+        return
     if args.command == "plot":
         run_dir = Path(args.run_dir)
         if not (run_dir / "config.json").exists():
