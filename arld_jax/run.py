@@ -29,7 +29,7 @@ import numpy as np
 
 from arld_jax import config as config_mod
 from arld_jax.config import SWEEPABLE, Config
-from arld_jax.sweep import REPO_ROOT, SHIPPED_EXPERT, SWEEP_PRESETS, Sweep
+from arld_jax.sweep import REPO_ROOT, SHIPPED_EXPERT, SWEEP_PRESETS, Sweep, resolve_expert_path
 
 CHECKPOINT_DIR = "checkpoints"
 METRICS_FILE = "metrics.npz"
@@ -402,9 +402,10 @@ def _expert_for(cfg: Config):  # noqa: ANN202
             f"(the shipped HalfCheetah expert is {SHIPPED_EXPERT})"
         )
     try:
-        read_expert_meta(cfg.expert_path)  # fail fast, before building the env
+        path = resolve_expert_path(cfg.expert_path)
+        read_expert_meta(path)  # fail fast, before building the env
         env = make_env(cfg)
-        return load_expert(cfg.expert_path, env.obs_dim, env.action_dim, cfg.expert_stochastic)
+        return load_expert(path, env.obs_dim, env.action_dim, cfg.expert_stochastic)
     except (FileNotFoundError, ValueError) as err:
         raise SystemExit(f"error: {err}") from None
 

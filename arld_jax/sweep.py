@@ -21,7 +21,18 @@ import jax.numpy as jnp
 from arld_jax.config import STRATEGIES, SWEEPABLE, Config, HParams, hparams_from_config
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-SHIPPED_EXPERT = REPO_ROOT / "experiments" / "expert"
+SHIPPED_EXPERT_PATH = "experiments/expert"
+"""The shipped expert, relative to the repository root (resolved by `resolve_expert_path`)."""
+SHIPPED_EXPERT = REPO_ROOT / SHIPPED_EXPERT_PATH
+
+
+def resolve_expert_path(path: str) -> Path:
+    """A relative expert path is taken from the current directory if it exists there, else from the
+    repository root (so presets work from anywhere)."""
+    p = Path(path)
+    if p.is_absolute() or p.exists():
+        return p
+    return REPO_ROOT / p
 
 
 @dataclass(frozen=True)
@@ -117,19 +128,24 @@ def _cpu_arld_config(**overrides: Any) -> Config:
     A scaled-down paper protocol: MJX HalfCheetah, paper networks (2x256), batch 256, alpha 0.2,
     prioritized replay with demo bonus; 2 envs per run with one update per iteration (0.5 updates
     per env step: on a 2-core CPU the updates are the whole cost, see benchmarks/), 1,000 warm-up
-    steps, budget 1,500 demonstrated steps, N_r = 1,000, b = 0.1, t_query = 0.1 (the paper's best
-    values), C = 5."""
+    steps, 8k env steps per run, one deterministic evaluation episode every 1,000 steps (HalfCheetah's
+    deterministic returns vary little across initial states; evaluation costs as much as training
+    env steps here), budget 1,500 demonstrated steps, N_r = 1,000, b = 0.1, t_query = 0.1 (the
+    paper's best values), C = 5."""
     base: dict[str, Any] = dict(
         num_envs=2,
         updates_per_env_step=0.5,
         learning_starts=1_000,
-        num_eval_episodes=2,
+        total_env_steps=8_000,
+        replay_capacity=8_000,
+        eval_every=1_000,
+        num_eval_episodes=1,
         budget=1_500,
         window_size=1_000,
         query_prob=0.1,
         t_query=0.1,
         demo_steps=5,
-        expert_path=str(SHIPPED_EXPERT),
+        expert_path=SHIPPED_EXPERT_PATH,
     )
     base.update(overrides)
     return Config(**base)
@@ -137,15 +153,15 @@ def _cpu_arld_config(**overrides: Any) -> Config:
 
 def preset_default() -> Sweep:
     """~10 min on a 2-core CPU: SAC vs GQSAC vs BQSAC vs AQSAC (intrinsic sigma), 3 seeds, 8k env
-    steps of MJX HalfCheetah (the CPU protocol of experiments/, shorter)."""
-    cfg = _cpu_arld_config(total_env_steps=8_000, eval_every=1_000, replay_capacity=8_000)
+    steps of MJX HalfCheetah (the CPU protocol of the committed experiment)."""
+    cfg = _cpu_arld_config()
     return Sweep(cfg=cfg, sweep={"strategy": STRATEGIES}, seeds=(0, 1, 2))
 
 
 def preset_experiment() -> Sweep:
-    """The committed CPU experiment: 4 strategies x 2 uncertainty measures x 5 seeds, 12k env steps
-    (about an hour on a 2-core CPU)."""
-    cfg = _cpu_arld_config(total_env_steps=12_000, eval_every=1_500, replay_capacity=12_000)
+    """The committed CPU experiment: 4 strategies x 2 uncertainty measures x 5 seeds, 8k env steps
+    each (40 runs in one compiled program; about 40 min on a 2-core CPU)."""
+    cfg = _cpu_arld_config()
     return Sweep(cfg=cfg, sweep=_arld_cells(), seeds=(0, 1, 2, 3, 4))
 
 
@@ -168,7 +184,7 @@ def preset_paper() -> Sweep:
         num_eval_episodes=10,
         budget=10_000,
         window_size=5_000,
-        expert_path=str(SHIPPED_EXPERT),
+        expert_path=SHIPPED_EXPERT_PATH,
     )
     sweep = _arld_cells(
         t_query=(0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7),
