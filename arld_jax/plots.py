@@ -73,7 +73,7 @@ def _partial_note(run: Run) -> str:
     steps = env_steps_axis(run)
     total = run["config"].get("config", {}).get("total_env_steps")
     last = int(steps[-1]) if len(steps) else 0
-    return f"  [partial: {last:,} of {total:,} env steps]" if total else "  [partial]"
+    return f"\n[partial: {last:,} of {total:,} env steps]" if total else "\n[partial]"
 
 
 def _steps_axis(ax: Axes) -> None:
