@@ -196,14 +196,10 @@ def parse_args(argv: list[str]) -> tuple[argparse.Namespace, Sweep | None]:
         for n in list(FIELDS) + ["seeds", "num_seeds"]
         if getattr(args, n, None) is not None
     }
-    base = expert_sweep() if args.preset == "expert" else SWEEP_PRESETS[args.preset]()
+    # The expert is trained with the plain-SAC preset (3 seeds, 100k steps).
+    preset = "sac" if args.preset == "expert" else args.preset
+    base = SWEEP_PRESETS[preset]()
     return args, apply_overrides(base, overrides)
-
-
-def expert_sweep() -> Sweep:
-    """Plain SAC, 3 seeds, 100k env steps: the expert's training (and a SAC learning curve)."""
-    cfg = Config(total_env_steps=100_000, replay_capacity=100_000, eval_every=5_000)
-    return Sweep(cfg=cfg, seeds=(0, 1, 2))
 
 
 # ---------------------------------------------------------------- the resumable driver
