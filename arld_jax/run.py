@@ -81,8 +81,9 @@ def parse_value(name: str, text: str) -> Any:
         raise SystemExit(f"error: --{name} {text!r} is not a valid {kind}") from None
 
 
-def apply_overrides(base: Sweep, overrides: dict[str, str]) -> Sweep:
-    """Apply --FIELD VALUE overrides: a comma list on a sweepable field sweeps it."""
+def apply_overrides(base: Sweep, overrides: dict[str, str], full_grid: bool = False) -> Sweep:
+    """Apply --FIELD VALUE overrides: a comma list on a sweepable field sweeps it. `full_grid`
+    keeps cells that differ only in fields their strategy ignores (see `sweep.RELEVANT_FOR`)."""
     fields, sweep, seeds = {}, dict(base.sweep), base.seeds
     for name, text in overrides.items():
         if name == "seeds":
@@ -104,7 +105,12 @@ def apply_overrides(base: Sweep, overrides: dict[str, str]) -> Sweep:
             sweep.pop(name, None)
             fields[name] = values[0]
     try:
-        return Sweep(cfg=base.cfg.replace(**fields), sweep=sweep, seeds=seeds)
+        return Sweep(
+            cfg=base.cfg.replace(**fields),
+            sweep=sweep,
+            seeds=seeds,
+            prune=base.prune and not full_grid,
+        )
     except ValueError as err:
         raise SystemExit(f"error: {err}") from None
 
@@ -147,6 +153,13 @@ def build_parser() -> argparse.ArgumentParser:
             help="evaluation periods per compiled chunk (checkpoint after each); default: ~10 chunks",
         )
         p.add_argument("--no_plots", action="store_true", help="skip the figures")
+        p.add_argument(
+            "--full_grid",
+            action="store_true",
+            help="keep every combination of the swept lists; by default a cell that differs only "
+            "in a field its strategy ignores (b outside bernoulli, t_query outside active, C, "
+            "budget and eps_demo under 'none') is trained once",
+        )
         p.add_argument(
             "--stop_after_chunks",
             type=int,
@@ -199,7 +212,7 @@ def parse_args(argv: list[str]) -> tuple[argparse.Namespace, Sweep | None]:
     # The expert is trained with the plain-SAC preset (3 seeds, 100k steps).
     preset = "sac" if args.preset == "expert" else args.preset
     base = SWEEP_PRESETS[preset]()
-    return args, apply_overrides(base, overrides)
+    return args, apply_overrides(base, overrides, full_grid=args.full_grid)
 
 
 # ---------------------------------------------------------------- the resumable driver

@@ -238,7 +238,16 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
             terminated=next_env.terminated,
             is_demo=is_demo.astype(jnp.float32),
         )
-        replay = per.add(state.replay, transition)
+        if cfg.update_before_add:  # updates independent of this iteration's env step
+            agent_state, replay, update_metrics = gradient_steps(
+                state.agent, state.replay, k_update, hp, it, warm
+            )
+            replay = per.add(replay, transition)
+        else:
+            replay = per.add(state.replay, transition)
+            agent_state, replay, update_metrics = gradient_steps(
+                state.agent, replay, k_update, hp, it, warm
+            )
 
         # Episode end (a time limit, not a termination): all envs end together; fresh initial states.
         episode_return = state.episode_return + next_env.reward
@@ -247,9 +256,6 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
         next_env = jax.lax.cond(episode_end, lambda: env.reset(k_reset, num_envs), lambda: next_env)
         episode_return = jnp.where(episode_end, 0.0, episode_return)
 
-        agent_state, replay, update_metrics = gradient_steps(
-            state.agent, replay, k_update, hp, it, warm
-        )
         env_step = (it + 1) * num_envs
         all_envs = jnp.ones(num_envs, bool)
         new_state = TrainState(

@@ -11,6 +11,7 @@ Sections, in the order they run (benchmarks/README.md says what each figure mean
     env         env-only env steps/s with random actions (MJX HalfCheetah, 1 and 16 envs)
     update      update-only updates/s at B=256 on a fixed batch (f32 and bf16 matmul inputs)
     trainer     the full trainer (1 env; 16 envs), with a breakdown of where a period's time goes
+    overlap     the trainer with update_before_add (updates may overlap the env step) vs default
     seeds       total updates/s of 1, 2, 4, 8 vmapped seeds against one seed run N times
     first_step  cold and warm (persistent compilation cache) time to the first training chunk
     memory      replay and TrainState bytes per seed at replay capacity 1M
@@ -60,6 +61,7 @@ SECTIONS: tuple[str, ...] = (
     "env",
     "update",
     "trainer",
+    "overlap",
     "seeds",
     "first_step",
     "memory",
@@ -616,7 +618,9 @@ def section_update(b: Bench) -> dict:
 # ---------------------------------------------------------------- 5. full trainer
 
 
-def trainer_config(sizes: Sizes, toy: bool, num_envs: int) -> Config:
+def trainer_config(
+    sizes: Sizes, toy: bool, num_envs: int, update_before_add: bool = False
+) -> Config:
     """One warm-up period plus `timed_periods` timed ones, 1 update per env step, 1 eval episode.
 
     The random warm-up (learning_starts = half a period) lies inside the first period, so every
@@ -634,6 +638,7 @@ def trainer_config(sizes: Sizes, toy: bool, num_envs: int) -> Config:
         updates_per_env_step=1.0,
         hidden_sizes=sizes.trainer_hidden,
         batch_size=sizes.trainer_batch,
+        update_before_add=update_before_add,
     )
     if toy:
         fields |= dict(env_name="toy", episode_length=sizes.toy_episode_length)
@@ -691,13 +696,15 @@ def time_periods(trainer: Trainer, num_seeds: int, max_timed: int) -> dict:
     }
 
 
-def trainer_run(b: Bench, num_envs: int, num_seeds: int) -> dict:
+def trainer_run(b: Bench, num_envs: int, num_seeds: int, update_before_add: bool = False) -> dict:
     """Timed trainer periods of the section's config (memoized: seeds reuses trainer's 1 x 1).
 
     One seed times `timed_periods` periods; more seeds (N times the work) time one."""
-    memo_key = ("trainer", num_envs, num_seeds)
+    memo_key = ("trainer", num_envs, num_seeds) + (
+        ("update_before_add",) if update_before_add else ()
+    )
     if memo_key not in b.memo:
-        cfg = trainer_config(b.sizes, b.toy_trainer, num_envs)
+        cfg = trainer_config(b.sizes, b.toy_trainer, num_envs, update_before_add)
         trainer = make_train(cfg)
         max_timed = b.sizes.timed_periods if num_seeds == 1 else 1
         b.memo[memo_key] = (trainer, time_periods(trainer, num_seeds, max_timed))
@@ -851,6 +858,35 @@ def _print_trainer(out: dict) -> None:
         ["config", "evaluation", "env", "updates", "replay", "other"],
         shares,
     )
+
+
+def section_overlap(b: Bench) -> dict:
+    """The trainer with `update_before_add` (updates independent of the iteration's env step, so
+    XLA:CPU may overlap them) against the default order, at 1 and 16 envs."""
+    out = {}
+    for num_envs in (1, 16):
+        base = trainer_run(b, num_envs, 1)
+        alt = trainer_run(b, num_envs, 1, update_before_add=True)
+        out[f"envs_{num_envs}"] = {
+            "add_then_update_env_steps_per_s": base["env_steps_per_s"],
+            "update_before_add_env_steps_per_s": alt["env_steps_per_s"],
+            "speedup": alt["env_steps_per_s"] / base["env_steps_per_s"],
+            "update_before_add_updates_per_s": alt["updates_per_s"],
+        }
+    print_table(
+        "update order: add-then-update (default) vs update_before_add, 1 update per env step",
+        ["envs", "default env steps/s", "update_before_add env steps/s", "speedup"],
+        [
+            [
+                k,
+                v["add_then_update_env_steps_per_s"],
+                v["update_before_add_env_steps_per_s"],
+                v["speedup"],
+            ]
+            for k, v in out.items()
+        ],
+    )
+    return out
 
 
 # ---------------------------------------------------------------- 6. vmapped seeds
@@ -1088,6 +1124,7 @@ SECTION_FUNCS: dict[str, Callable[[Bench], dict]] = {
     "env": section_env,
     "update": section_update,
     "trainer": section_trainer,
+    "overlap": section_overlap,
     "seeds": section_seeds,
     "first_step": section_first_step,
     "memory": section_memory,

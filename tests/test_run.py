@@ -32,17 +32,62 @@ def test_overrides_and_lists_become_a_vmapped_grid():
     assert sweep.cfg.budget == 50
     assert sweep.sweep == {"strategy": ("none", "active"), "t_query": (0.1, 0.2)}
     assert sweep.seeds == (3, 4)
+    # Pruned: t_query cannot change a 'none' run, so 'none' is one cell, not two copies.
+    runs = sweep.runs()
+    assert len(runs) == sweep.num_runs == (1 + 2) * 2
+    assert [(r["strategy"], r["t_query"], r["seed"], r["cell"]) for r in runs] == [
+        ("none", 0.1, 3, 0),  # t_query left at the base value
+        ("none", 0.1, 4, 0),
+        ("active", 0.1, 3, 1),
+        ("active", 0.1, 4, 1),
+        ("active", 0.2, 3, 2),
+        ("active", 0.2, 4, 2),
+    ]
+    assert runs[0]["cell_label"] == "strategy=none"
+    assert runs[2]["cell_label"] == "strategy=active t_query=0.1"
+    hps, keys = sweep.hparams_and_keys()
+    assert hps.strategy.shape == (6,) and keys.shape == (6,)
+    assert list(np.asarray(hps.strategy)) == [0, 0, 3, 3, 3, 3]
+    np.testing.assert_allclose(np.asarray(hps.t_query), [0.1, 0.1, 0.1, 0.1, 0.2, 0.2])
+
+
+def test_full_grid_keeps_every_combination():
+    args, sweep = run.parse_args(
+        ["seed_sweep", "--preset", "tiny", "--strategy=none,active", "--t_query=0.1,0.2"]
+        + ["--seeds=3,4", "--full_grid"]
+    )
     runs = sweep.runs()
     assert len(runs) == sweep.num_runs == 2 * 2 * 2
-    assert [(r["strategy"], r["t_query"], r["seed"]) for r in runs[:3]] == [
+    assert [(r["strategy"], r["t_query"], r["seed"]) for r in runs[:4]] == [
         ("none", 0.1, 3),
         ("none", 0.1, 4),
         ("none", 0.2, 3),
+        ("none", 0.2, 4),
     ]
-    hps, keys = sweep.hparams_and_keys()
-    assert hps.strategy.shape == (8,) and keys.shape == (8,)
-    assert list(np.asarray(hps.strategy)) == [0, 0, 0, 0, 3, 3, 3, 3]
-    np.testing.assert_allclose(np.asarray(hps.t_query), [0.1, 0.1, 0.2, 0.2] * 2)
+    # The two sweeps are different runs: neither may resume the other's directory.
+    assert sweep.to_json() != _sweep(strategy="none,active", t_query="0.1,0.2").to_json()
+
+
+def test_pruning_follows_each_fields_strategies():
+    """b only for bernoulli, t_query only for active, C / budget / eps_d for every querying one."""
+    sweep = _sweep(
+        strategy="none,greedy,bernoulli,active",
+        query_prob="0.1,0.3",
+        t_query="0.1,0.2,0.4",
+        demo_steps="1,5",
+    )
+    per_strategy = {}
+    for cell in sweep.cells():
+        per_strategy.setdefault(cell["strategy"], []).append(cell)
+    assert [len(per_strategy[s]) for s in ("none", "greedy", "bernoulli", "active")] == [
+        1,
+        2,
+        2 * 2,
+        3 * 2,
+    ]
+    assert set(per_strategy["bernoulli"][0]) == {"strategy", "query_prob", "demo_steps"}
+    assert set(per_strategy["active"][0]) == {"strategy", "t_query", "demo_steps"}
+    assert sweep.num_runs == 13 * len(sweep.seeds)
 
 
 def test_static_field_list_is_refused():

@@ -166,3 +166,17 @@ def test_no_expert_refuses_query_strategies():
     with pytest.raises(ValueError, match="needs an expert"):
         trainer.train(jax.random.key(0), hp)
     assert query.NONE == 0
+
+
+def test_update_before_add_learns_and_keeps_demos():
+    """`update_before_add` (updates on the replay before this iteration's transitions) is a
+    performance option: it must still learn the toy task and mark the expert's steps as demos."""
+    cfg = tiny(update_before_add=True, strategy="greedy", budget=100)
+    trainer = make_train(cfg, TOY_EXPERT)
+    hp = hparams_from_config(cfg)
+    state, metrics = jax.jit(trainer.train)(jax.random.key(0), hp)
+    final = float(metrics.eval_return[-1])
+    assert final > 0.85 * cfg.episode_length, final
+    assert int(metrics.demos_used[-1]) == cfg.budget
+    assert float(jnp.sum(state.replay.data.is_demo)) == cfg.budget
+    assert int(state.replay.size) == cfg.replay_capacity
