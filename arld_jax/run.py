@@ -231,6 +231,11 @@ def _check_or_write_identity(out: Path, identity: dict[str, Any]) -> bool:
         keys = ("config", "sweep", "seeds")
         old = {k: saved.get(k) for k in keys}
         new = json.loads(json.dumps({k: identity[k] for k in keys}))
+        # A Config field added after the run was saved, at its default, is what the run had (new
+        # fields keep the old behaviour at their default), so it does not block resuming.
+        for f in set(new["config"]) - set(old["config"] or {}):
+            if f in FIELDS and new["config"][f] == json.loads(json.dumps(FIELDS[f].default)):
+                del new["config"][f]
         if old != new:
             diffs = []
             for k in keys:

@@ -162,6 +162,20 @@ def test_other_config_in_same_directory_is_refused(uninterrupted):
     assert (full / "config.json").read_text() == before
 
 
+def test_field_added_later_at_its_default_does_not_block_resume(tmp_path):
+    """A directory written before a Config field existed resumes when the field is at its default
+    (new fields keep the old behaviour there), and is refused when it is not."""
+    sweep = _sweep(strategy="none,active")
+    identity = sweep.to_json() | {"preset": "tiny"}
+    old = json.loads(json.dumps(identity))
+    del old["config"]["update_before_add"]
+    (tmp_path / "config.json").write_text(json.dumps(old))
+    assert run._check_or_write_identity(tmp_path, identity) is True
+    changed = _sweep(strategy="none,active", update_before_add="true").to_json()
+    with pytest.raises(SystemExit, match=r"update_before_add: None -> True"):
+        run._check_or_write_identity(tmp_path, changed | {"preset": "tiny"})
+
+
 def test_results_files(uninterrupted):
     sweep, full = uninterrupted
     saved = json.loads((full / "config.json").read_text())
