@@ -75,10 +75,11 @@ class Config:
     """Gradient updates per env step (paper: 1). With num_envs envs, num_envs * this updates run per
     iteration; the product must be a whole number."""
     update_before_add: bool = False
-    """Performance: run an iteration's gradient updates on the replay as it was before that
-    iteration's transitions are added (they become sampleable one iteration later). The updates then
-    do not wait for the env step, so XLA:CPU's thunk executor may run the two at once on two cores.
-    Off by default: the committed runs were made with add-then-update."""
+    """Performance experiment: run an iteration's gradient updates on the replay as it was before
+    that iteration's transitions are added (they become sampleable one iteration later), so the
+    updates do not wait for the env step. Measured on the 2-core CPU with MJX (`benchmarks/bench.py
+    --only overlap`) it is SLOWER (0.69x at 1 env, 0.96x at 16 envs), though 1.4x faster on the toy
+    env; hence off. Kept for accelerators, where the overlap may pay."""
     autotune_alpha: bool = False
     """Tune the temperature alpha towards a target entropy (Haarnoja et al. 2018b). The paper fixes 0.2."""
     log_std_min: float = -20.0
