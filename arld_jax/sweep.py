@@ -106,10 +106,10 @@ class Sweep:
 
     def runs(self) -> list[dict[str, Any]]:
         """The per-run records written to runs.json."""
-        records = []
+        records, cells = [], self.cells()
         for i, run_cfg in enumerate(self.run_configs()):
             cell_index, _ = divmod(i, len(self.seeds))
-            cell = self.cells()[cell_index]
+            cell = cells[cell_index]
             record = {"run": i, "cell": cell_index, "seed": run_cfg.seed}
             record["cell_label"] = " ".join(f"{k}={v}" for k, v in cell.items()) or "base"
             record.update({name: getattr(run_cfg, name) for name in SWEEPABLE if name != "seed"})

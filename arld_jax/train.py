@@ -238,16 +238,14 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
             terminated=next_env.terminated,
             is_demo=is_demo.astype(jnp.float32),
         )
-        if cfg.update_before_add:  # updates independent of this iteration's env step
-            agent_state, replay, update_metrics = gradient_steps(
-                state.agent, state.replay, k_update, hp, it, warm
-            )
+        # Default: add, then update. `update_before_add`: update on the replay before this
+        # iteration's transitions, so the updates do not depend on this env step.
+        replay = state.replay if cfg.update_before_add else per.add(state.replay, transition)
+        agent_state, replay, update_metrics = gradient_steps(
+            state.agent, replay, k_update, hp, it, warm
+        )
+        if cfg.update_before_add:
             replay = per.add(replay, transition)
-        else:
-            replay = per.add(state.replay, transition)
-            agent_state, replay, update_metrics = gradient_steps(
-                state.agent, replay, k_update, hp, it, warm
-            )
 
         # Episode end (a time limit, not a termination): all envs end together; fresh initial states.
         episode_return = state.episode_return + next_env.reward
