@@ -116,22 +116,23 @@ class QNetwork(nn.Module):
 
 
 class TwinCritic(nn.Module):
-    """NUM_CRITICS independent critics evaluated as one batched matmul; output [..., NUM_CRITICS]."""
+    """NUM_CRITICS independent critics (clipped double Q); output [..., NUM_CRITICS].
+
+    Two separate QNetworks (parameters `q0`, `q1`), not one `nn.vmap`-stacked ensemble: on XLA:CPU
+    the stacked form's batched weight-gradient dots are slower, and separate critics made the
+    whole update ~10% faster here (benchmarks/README.md, "Session 3").
+    """
 
     hidden_sizes: Sequence[int] = (256, 256)
     dtype: jnp.dtype = jnp.float32
 
     @nn.compact
     def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
-        ensemble = nn.vmap(
-            QNetwork,
-            variable_axes={"params": 0},
-            split_rngs={"params": True},
-            in_axes=None,
-            out_axes=-1,
-            axis_size=NUM_CRITICS,
-        )
-        return ensemble(self.hidden_sizes, self.dtype)(obs, action)
+        qs = [
+            QNetwork(self.hidden_sizes, self.dtype, name=f"q{k}")(obs, action)
+            for k in range(NUM_CRITICS)
+        ]
+        return jnp.stack(qs, axis=-1)
 
 
 # ---------------------------------------------------------------- tanh-Gaussian helpers

@@ -193,13 +193,16 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
         def one_update(carry, k):  # noqa: ANN001, ANN202
             agent_state, replay = carry
             k_sample, k_update = jax.random.split(k)
-            batch, indices, weights = per.sample(replay, k_sample, beta)
+            with jax.named_scope("replay_sample"):
+                batch, indices, weights = per.sample(replay, k_sample, beta)
             agent_state, td, metrics = jax.lax.cond(
                 warm, agent.no_update, agent.update, agent_state, batch, weights, hp, k_update
             )
             # Paper A.1 (DDPGfD): p = delta^2 + eps + eps_d for demonstrations.
             priorities = priority_from_td(td, batch.is_demo, cfg.per_eps, hp.eps_demo)
-            return (agent_state, per.set_priorities(replay, indices, priorities)), metrics
+            with jax.named_scope("replay_priorities"):
+                replay = per.set_priorities(replay, indices, priorities)
+            return (agent_state, replay), metrics
 
         keys = jax.random.split(key, cfg.updates_per_iter)
         (agent_state, replay), metrics = jax.lax.scan(one_update, (agent_state, replay), keys)
@@ -229,7 +232,8 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
         action = jnp.where(is_demo[:, None], expert_action, agent_action)
         chex.assert_shape(action, (num_envs, env.action_dim))
 
-        next_env = env.step(state.env, action)
+        with jax.named_scope("env_step"):  # named scopes label the ops in a profile
+            next_env = env.step(state.env, action)
         transition = Transition(
             obs=obs,
             action=action,  # the executed action (the expert's on demonstrated steps)
@@ -240,18 +244,24 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
         )
         # Default: add, then update. `update_before_add`: update on the replay before this
         # iteration's transitions, so the updates do not depend on this env step.
-        replay = state.replay if cfg.update_before_add else per.add(state.replay, transition)
-        agent_state, replay, update_metrics = gradient_steps(
-            state.agent, replay, k_update, hp, it, warm
-        )
+        with jax.named_scope("replay_add"):
+            replay = state.replay if cfg.update_before_add else per.add(state.replay, transition)
+        with jax.named_scope("gradient_steps"):
+            agent_state, replay, update_metrics = gradient_steps(
+                state.agent, replay, k_update, hp, it, warm
+            )
         if cfg.update_before_add:
-            replay = per.add(replay, transition)
+            with jax.named_scope("replay_add"):
+                replay = per.add(replay, transition)
 
         # Episode end (a time limit, not a termination): all envs end together; fresh initial states.
         episode_return = state.episode_return + next_env.reward
         episode_end = t == length - 1
         finished_return = jnp.where(episode_end, jnp.mean(episode_return), jnp.nan)
-        next_env = jax.lax.cond(episode_end, lambda: env.reset(k_reset, num_envs), lambda: next_env)
+        with jax.named_scope("env_reset"):
+            next_env = jax.lax.cond(
+                episode_end, lambda: env.reset(k_reset, num_envs), lambda: next_env
+            )
         episode_return = jnp.where(episode_end, 0.0, episode_return)
 
         env_step = (it + 1) * num_envs
@@ -289,12 +299,14 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
         state, out = jax.lax.scan(lambda s, i: iteration(s, i, hp), state, its)
         key, k_eval = jax.random.split(state.key)
         state = state.replace(key=key)
+        with jax.named_scope("evaluate"):
+            eval_return = evaluate(state.agent.actor_params, k_eval)
         traces = cfg.traces_per_eval
         learning = out.learning
         finished = ~jnp.isnan(out.finished_return)
         metrics = PeriodMetrics(
             env_steps=(p + 1) * cfg.eval_every,
-            eval_return=evaluate(state.agent.actor_params, k_eval),
+            eval_return=eval_return,
             train_return=jnp.where(
                 jnp.any(finished), _masked_mean(out.finished_return, finished), jnp.nan
             ),

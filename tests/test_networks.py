@@ -107,10 +107,10 @@ def test_twin_critic_has_two_independent_critics() -> None:
     assert q.shape == (5, networks.NUM_CRITICS) == (5, 2)
     assert np.all(np.abs(np.asarray(q[:, 0] - q[:, 1])) > 1e-6)  # different initialisations
 
-    # Critic k is exactly a QNetwork with the k-th slice of the stacked parameters.
+    # Critic k is exactly a QNetwork with its own parameters q{k}.
     single_apply = jax.jit(networks.QNetwork(hidden_sizes=hidden).apply)
     for k in range(2):
-        params_k = jax.tree.map(lambda p, k=k: p[k], params["params"]["VmapQNetwork_0"])
+        params_k = params["params"][f"q{k}"]
         np.testing.assert_allclose(
             q[:, k], single_apply({"params": params_k}, obs, action), rtol=1e-5, atol=1e-6
         )
