@@ -33,6 +33,7 @@ from arld_jax.sweep import REPO_ROOT, SHIPPED_EXPERT, SWEEP_PRESETS, Sweep, reso
 
 CHECKPOINT_DIR = "checkpoints"
 METRICS_FILE = "metrics.npz"
+LAYOUT_FILE = "state_layout.json"  # fingerprint of the checkpointed TrainState's tree and shapes
 
 
 # ---------------------------------------------------------------- field docs and parsing
@@ -339,10 +340,15 @@ def run_sweep(
     state = init(keys, hps)
     metrics: dict[str, np.ndarray] = {}
     done = 0
+    layout = state_layout(state)
     if resumed and mngr.latest_step() is not None:
         done = mngr.latest_step()
+        _check_layout(out, layout, done)
         abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, to_checkpoint(state))
-        restored = mngr.restore(done, args=ocp.args.StandardRestore(abstract))
+        try:
+            restored = mngr.restore(done, args=ocp.args.StandardRestore(abstract))
+        except Exception as err:  # a checkpoint from before LAYOUT_FILE existed, other layout
+            raise SystemExit(_layout_error(out, done, f"restoring it failed: {err}")) from None
         state = from_checkpoint(restored, state)
         saved = np.load(out / METRICS_FILE)
         metrics = {
@@ -371,6 +377,8 @@ def run_sweep(
         samples = _state_samples(state, num_runs)
         _save_npz(out / METRICS_FILE, metrics | samples)  # before the checkpoint (see resume)
         mngr.save(c + 1, args=ocp.args.StandardSave(to_checkpoint(state)))
+        if not (out / LAYOUT_FILE).exists():
+            (out / LAYOUT_FILE).write_text(json.dumps(layout) + "\n")
         mngr.wait_until_finished()
         chunks_this_call += 1
         steps_done = (c + 1) * chunk * cfg.eval_every
@@ -442,6 +450,36 @@ def to_checkpoint(state: Any) -> dict[str, Any]:
         for i, x in enumerate(leaves)
         if x.size > 0
     }
+
+
+def state_layout(state: Any) -> dict[str, str]:
+    """A fingerprint of the state's tree structure (parameter names included) and leaf shapes and
+    dtypes. The checkpoint stores leaves by position, so a run saved by code with another state
+    layout (e.g. before the twin critics became `q0`/`q1`) must not be restored into this one."""
+    import hashlib
+
+    import jax
+
+    leaves, treedef = jax.tree.flatten(state)
+    text = str(treedef) + "".join(f"{x.shape}{x.dtype}" for x in leaves)
+    return {"sha256": hashlib.sha256(text.encode()).hexdigest(), "num_leaves": str(len(leaves))}
+
+
+def _layout_error(out: Path, done: int, why: str) -> str:
+    return (
+        f"error: {out} holds a checkpoint (chunk {done}) of a training state with another layout "
+        f"than this version of arld_jax builds ({why}); it was probably written by an older version. "
+        f"Nothing was overwritten: its metrics up to chunk {done} stay in {out / METRICS_FILE}. "
+        "Use another --out to start afresh, or the arld_jax version that wrote it to resume."
+    )
+
+
+def _check_layout(out: Path, layout: dict[str, str], done: int) -> None:
+    path = out / LAYOUT_FILE
+    if path.exists():
+        saved = json.loads(path.read_text())
+        if saved != layout:
+            raise SystemExit(_layout_error(out, done, f"saved {saved}, now {layout}"))
 
 
 def from_checkpoint(saved: dict[str, Any], template: Any) -> Any:

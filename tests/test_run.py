@@ -153,6 +153,23 @@ def test_resume_after_a_stop_equals_uninterrupted(uninterrupted, tmp_path):
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
 
 
+def test_checkpoint_of_another_state_layout_is_refused(uninterrupted, tmp_path):
+    """A checkpoint whose TrainState layout differs (written by an older arld_jax) is not restored
+    position by position into the new state: a clear error, and the saved metrics are kept."""
+    import shutil
+
+    sweep, full = uninterrupted
+    saved = json.loads((full / run.LAYOUT_FILE).read_text())
+    assert int(saved["num_leaves"]) > 0 and len(saved["sha256"]) == 64
+    out = tmp_path / "old"
+    shutil.copytree(full, out)
+    (out / run.LAYOUT_FILE).write_text(json.dumps(saved | {"sha256": "0" * 64}))
+    metrics_before = (out / run.METRICS_FILE).read_bytes()
+    with pytest.raises(SystemExit, match=r"another layout .* Nothing was overwritten"):
+        run.run_sweep(sweep, out, chunk_periods=1, plots=False, log=lambda *a: None)
+    assert (out / run.METRICS_FILE).read_bytes() == metrics_before
+
+
 def test_other_config_in_same_directory_is_refused(uninterrupted):
     sweep, full = uninterrupted
     before = (full / "config.json").read_text()
