@@ -78,8 +78,8 @@ class Config:
     """Performance experiment: run an iteration's gradient updates on the replay as it was before
     that iteration's transitions are added (they become sampleable one iteration later), so the
     updates do not wait for the env step. Measured on the 2-core CPU with MJX (`benchmarks/bench.py
-    --only overlap`) it is SLOWER (0.69x at 1 env, 0.96x at 16 envs), though 1.4x faster on the toy
-    env; hence off. Kept for accelerators, where the overlap may pay."""
+    --only overlap`) it is SLOWER at 1 env (0.69x, 0.64x on two hosts) and mixed at 16 envs (0.96x,
+    1.09x), though 1.4x faster on the toy env; hence off. Kept for accelerators, where the overlap may pay."""
     autotune_alpha: bool = False
     """Tune the temperature alpha towards a target entropy (Haarnoja et al. 2018b). The paper fixes 0.2."""
     log_std_min: float = -20.0

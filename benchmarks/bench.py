@@ -62,6 +62,7 @@ SECTIONS: tuple[str, ...] = (
     "update",
     "trainer",
     "overlap",
+    "replay",
     "seeds",
     "first_step",
     "memory",
@@ -712,10 +713,17 @@ def trainer_run(b: Bench, num_envs: int, num_seeds: int, update_before_add: bool
 
 
 def replay_scan(
-    per: PrioritizedReplay, cfg: Config, obs_dim: int, action_dim: int, iters: int
+    per: PrioritizedReplay,
+    cfg: Config,
+    obs_dim: int,
+    action_dim: int,
+    iters: int,
+    num_seeds: int = 0,
 ) -> tuple[Callable[..., Any], Transition]:
     """Jitted scan of the trainer's replay work: add num_envs items, then updates_per_iter x
-    (sample, set priorities from the sampled batch, so the gather is not optimized away)."""
+    (sample, set priorities from the sampled batch, so the gather is not optimized away).
+    With `num_seeds` > 0 every iteration is vmapped over that many buffers (the state then has a
+    leading seed axis), as in a seed-vmapped trainer."""
     example = example_transition(obs_dim, action_dim)
 
     def one_sample(r: Any, k: jax.Array) -> tuple[Any, jax.Array]:
@@ -736,8 +744,13 @@ def replay_scan(
         r, w = jax.lax.scan(one_sample, r, jax.random.split(k_sample, cfg.updates_per_iter))
         return r, jnp.sum(w)
 
+    def step(r: Any, k: jax.Array) -> tuple[Any, jax.Array]:
+        if num_seeds:
+            return jax.vmap(iteration)(r, jax.random.split(k, num_seeds))
+        return iteration(r, k)
+
     def run(r: Any, key: jax.Array) -> tuple[Any, jax.Array]:
-        r, w = jax.lax.scan(iteration, r, jax.random.split(key, iters))
+        r, w = jax.lax.scan(step, r, jax.random.split(key, iters))
         return r, jnp.sum(w)
 
     return jax.jit(run, donate_argnums=0), example
@@ -885,6 +898,56 @@ def section_overlap(b: Bench) -> dict:
             ]
             for k, v in out.items()
         ],
+    )
+    return out
+
+
+# ---------------------------------------------------------------- 5b. replay alone under seed vmap
+
+
+def section_replay(b: Bench) -> dict:
+    """The trainer's replay work per iteration (1 env, 1 update: add 1, sample 256, write 256
+    priorities) for 1 buffer and for N seed-vmapped buffers, at capacities 100k and 1M."""
+    capacities = (10_000,) if b.args.quick else (100_000, 1_000_000)
+    seed_counts = (1, 2) if b.args.quick else (1, 8)
+    iters = 20 if b.args.quick else 200
+    rows, out = [], {}
+    for capacity in capacities:
+        cfg = Config(replay_capacity=capacity, batch_size=PAPER_BATCH)
+        per = make_prioritized_replay(capacity, PAPER_BATCH, cfg.per_alpha)
+        for n in seed_counts:
+            run, example = replay_scan(
+                per, cfg, HC_OBS_DIM, HC_ACTION_DIM, iters, num_seeds=n if n > 1 else 0
+            )
+            state = per.init(example)
+            if n > 1:
+                state = jax.vmap(lambda _, p=per, e=example: p.init(e))(jnp.arange(n))
+            holder = {"r": state}
+            del state
+
+            def call(run=run, holder=holder) -> Any:  # noqa: ANN001
+                holder["r"], w = run(holder["r"], jax.random.key(4))
+                return w
+
+            times = summarize([t / iters for t in time_calls(call, b.sizes.repeats)])
+            ms = times["median_s"] * 1e3
+            out[f"cap_{capacity}_seeds_{n}"] = {
+                "capacity": capacity,
+                "seeds": n,
+                "ms_per_iteration_all_seeds": ms,
+                "ms_per_iteration_per_seed": ms / n,
+            }
+            rows.append([f"{capacity:,}", n, ms, ms / n])
+            del holder["r"]
+    for capacity in capacities:
+        one = out[f"cap_{capacity}_seeds_1"]["ms_per_iteration_all_seeds"]
+        n = seed_counts[-1]
+        many = out[f"cap_{capacity}_seeds_{n}"]["ms_per_iteration_all_seeds"]
+        out[f"cap_{capacity}_vmapped_vs_separate"] = n * one / many
+    print_table(
+        f"replay alone per iteration (add 1, sample {PAPER_BATCH}, write priorities), {iters} scanned",
+        ["capacity", "seeds", "ms/iter (all seeds)", "ms/iter per seed"],
+        rows,
     )
     return out
 
@@ -1089,6 +1152,14 @@ def print_summary(sections: dict) -> None:
         for k, v in sections.get("seeds", {}).items()
         if isinstance(v, dict) and "total_updates_per_s" in v
     ]
+    replay_rows = [
+        [
+            f"replay alone, capacity {v['capacity']:,}, {v['seeds']} seed(s): ms/iter per seed",
+            v["ms_per_iteration_per_seed"],
+        ]
+        for v in sections.get("replay", {}).values()
+        if isinstance(v, dict) and "ms_per_iteration_per_seed" in v
+    ]
     rows = [
         ["matmul f32 256-wide, GFLOP/s (best)", g("flops", "matmul_gflops_f32_best")],
         ["matmul bf16-in/f32-acc 256-wide, GFLOP/s (best)", g("flops", "matmul_gflops_bf16_best")],
@@ -1105,6 +1176,7 @@ def print_summary(sections: dict) -> None:
         ["trainer 1 env: fraction of limit", g("trainer", "envs_1", "fraction_of_limit")],
         ["trainer 16 envs: env steps/s", g("trainer", "envs_16", "env_steps_per_s")],
         ["trainer 16 envs: fraction of limit", g("trainer", "envs_16", "fraction_of_limit")],
+        *replay_rows,
         *seed_rows,
         ["first step cold, wall s", g("first_step", "cold", "wall_to_first_step_s")],
         ["first step warm, wall s", g("first_step", "warm", "wall_to_first_step_s")],
@@ -1125,6 +1197,7 @@ SECTION_FUNCS: dict[str, Callable[[Bench], dict]] = {
     "update": section_update,
     "trainer": section_trainer,
     "overlap": section_overlap,
+    "replay": section_replay,
     "seeds": section_seeds,
     "first_step": section_first_step,
     "memory": section_memory,
