@@ -455,20 +455,22 @@ def to_checkpoint(state: Any) -> dict[str, Any]:
 def state_layout(state: Any) -> dict[str, str]:
     """A fingerprint of the state's tree structure (parameter names included) and leaf shapes and
     dtypes. The checkpoint stores leaves by position, so a run saved by code with another state
-    layout (e.g. before the twin critics became `q0`/`q1`) must not be restored into this one."""
+    layout (e.g. before the twin critics became `q0`/`q1`) must not be restored into this one.
+    The leading (runs) axis is left out: its padding depends on the device count, not the code."""
     import hashlib
 
     import jax
 
     leaves, treedef = jax.tree.flatten(state)
-    text = str(treedef) + "".join(f"{x.shape}{x.dtype}" for x in leaves)
+    text = str(treedef) + "".join(f"{x.shape[1:]}{x.dtype}" for x in leaves)
     return {"sha256": hashlib.sha256(text.encode()).hexdigest(), "num_leaves": str(len(leaves))}
 
 
 def _layout_error(out: Path, done: int, why: str) -> str:
     return (
         f"error: {out} holds a checkpoint (chunk {done}) of a training state with another layout "
-        f"than this version of arld_jax builds ({why}); it was probably written by an older version. "
+        f"than this version of arld_jax builds ({why}); it was probably written by an older version "
+        "(or, if only the number of runs differs, on a different number of devices). "
         f"Nothing was overwritten: its metrics up to chunk {done} stay in {out / METRICS_FILE}. "
         "Use another --out to start afresh, or the arld_jax version that wrote it to resume."
     )
