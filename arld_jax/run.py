@@ -357,6 +357,7 @@ def run_sweep(
         log(
             f"resuming {out} after chunk {done}/{num_chunks} ({done * chunk * cfg.eval_every:,} env steps)"
         )
+    (out / LAYOUT_FILE).write_text(json.dumps(layout) + "\n")  # the layout of what is saved below
     compile_start = time.time()
     compiled = run_chunk.lower(state, hps, jnp.int32(0), chunk).compile()
     compile_seconds = time.time() - compile_start
@@ -377,8 +378,6 @@ def run_sweep(
         samples = _state_samples(state, num_runs)
         _save_npz(out / METRICS_FILE, metrics | samples)  # before the checkpoint (see resume)
         mngr.save(c + 1, args=ocp.args.StandardSave(to_checkpoint(state)))
-        if not (out / LAYOUT_FILE).exists():
-            (out / LAYOUT_FILE).write_text(json.dumps(layout) + "\n")
         mngr.wait_until_finished()
         chunks_this_call += 1
         steps_done = (c + 1) * chunk * cfg.eval_every
@@ -452,7 +451,7 @@ def to_checkpoint(state: Any) -> dict[str, Any]:
     }
 
 
-def state_layout(state: Any) -> dict[str, str]:
+def state_layout(state: Any) -> dict[str, Any]:
     """A fingerprint of the state's tree structure (parameter names included) and leaf shapes and
     dtypes. The checkpoint stores leaves by position, so a run saved by code with another state
     layout (e.g. before the twin critics became `q0`/`q1`) must not be restored into this one.
@@ -463,7 +462,7 @@ def state_layout(state: Any) -> dict[str, str]:
 
     leaves, treedef = jax.tree.flatten(state)
     text = str(treedef) + "".join(f"{x.shape[1:]}{x.dtype}" for x in leaves)
-    return {"sha256": hashlib.sha256(text.encode()).hexdigest(), "num_leaves": str(len(leaves))}
+    return {"sha256": hashlib.sha256(text.encode()).hexdigest(), "num_leaves": len(leaves)}
 
 
 def _layout_error(out: Path, done: int, why: str) -> str:
@@ -476,7 +475,7 @@ def _layout_error(out: Path, done: int, why: str) -> str:
     )
 
 
-def _check_layout(out: Path, layout: dict[str, str], done: int) -> None:
+def _check_layout(out: Path, layout: dict[str, Any], done: int) -> None:
     path = out / LAYOUT_FILE
     if path.exists():
         saved = json.loads(path.read_text())

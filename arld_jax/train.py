@@ -193,16 +193,13 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
         def one_update(carry, k):  # noqa: ANN001, ANN202
             agent_state, replay = carry
             k_sample, k_update = jax.random.split(k)
-            with jax.named_scope("replay_sample"):
-                batch, indices, weights = per.sample(replay, k_sample, beta)
+            batch, indices, weights = per.sample(replay, k_sample, beta)
             agent_state, td, metrics = jax.lax.cond(
                 warm, agent.no_update, agent.update, agent_state, batch, weights, hp, k_update
             )
             # Paper A.1 (DDPGfD): p = delta^2 + eps + eps_d for demonstrations.
             priorities = priority_from_td(td, batch.is_demo, cfg.per_eps, hp.eps_demo)
-            with jax.named_scope("replay_priorities"):
-                replay = per.set_priorities(replay, indices, priorities)
-            return (agent_state, replay), metrics
+            return (agent_state, per.set_priorities(replay, indices, priorities)), metrics
 
         keys = jax.random.split(key, cfg.updates_per_iter)
         (agent_state, replay), metrics = jax.lax.scan(one_update, (agent_state, replay), keys)
@@ -232,8 +229,8 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
         action = jnp.where(is_demo[:, None], expert_action, agent_action)
         chex.assert_shape(action, (num_envs, env.action_dim))
 
-        with jax.named_scope("env_step"):  # named scopes label the ops in a profile
-            next_env = env.step(state.env, action)
+        with jax.named_scope("env_step"):  # named scopes label the ops in a profile (also
+            next_env = env.step(state.env, action)  # replay_add/_sample/_priorities, in replay.py)
         transition = Transition(
             obs=obs,
             action=action,  # the executed action (the expert's on demonstrated steps)
@@ -244,15 +241,13 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
         )
         # Default: add, then update. `update_before_add`: update on the replay before this
         # iteration's transitions, so the updates do not depend on this env step.
-        with jax.named_scope("replay_add"):
-            replay = state.replay if cfg.update_before_add else per.add(state.replay, transition)
+        replay = state.replay if cfg.update_before_add else per.add(state.replay, transition)
         with jax.named_scope("gradient_steps"):
             agent_state, replay, update_metrics = gradient_steps(
                 state.agent, replay, k_update, hp, it, warm
             )
         if cfg.update_before_add:
-            with jax.named_scope("replay_add"):
-                replay = per.add(replay, transition)
+            replay = per.add(replay, transition)
 
         # Episode end (a time limit, not a termination): all envs end together; fresh initial states.
         episode_return = state.episode_return + next_env.reward

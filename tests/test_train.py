@@ -84,7 +84,7 @@ def test_vmapped_seed_equals_single_run():
     np.testing.assert_allclose(
         np.asarray(state.replay.data.action)[i],
         np.asarray(single_state.replay.data.action),
-        atol=1e-3,
+        atol=TOL,
     )
     # And the other runs lie outside that tolerance (the comparison is not vacuous).
     for j in (0, 2):
