@@ -756,12 +756,18 @@ def replay_scan(
     return jax.jit(run, donate_argnums=0), example
 
 
-def replay_seconds_per_iteration(b: Bench, cfg: Config, obs_dim: int, action_dim: int) -> float:
-    """Replay-only seconds of one trainer iteration at `cfg`'s capacity, batch and env count."""
+def replay_seconds_per_iteration(
+    b: Bench, cfg: Config, obs_dim: int, action_dim: int, num_seeds: int = 0, iters: int = 200
+) -> float:
+    """Replay-only seconds of one trainer iteration at `cfg`'s capacity, batch and env count
+    (all seeds together; `num_seeds` > 0: that many seed-vmapped buffers, see `replay_scan`)."""
     per = make_prioritized_replay(cfg.replay_capacity, cfg.batch_size, cfg.per_alpha)
-    iters = max(1, min(cfg.iters_per_eval, 200))
-    run, example = replay_scan(per, cfg, obs_dim, action_dim, iters)
-    holder = {"r": per.init(example)}
+    iters = max(1, min(cfg.iters_per_eval, iters))
+    run, example = replay_scan(per, cfg, obs_dim, action_dim, iters, num_seeds)
+    if num_seeds:
+        holder = {"r": jax.vmap(lambda _: per.init(example))(jnp.arange(num_seeds))}
+    else:
+        holder = {"r": per.init(example)}
 
     def call() -> Any:
         holder["r"], w = run(holder["r"], jax.random.key(4))
@@ -914,23 +920,11 @@ def section_replay(b: Bench) -> dict:
     rows, out = [], {}
     for capacity in capacities:
         cfg = Config(replay_capacity=capacity, batch_size=PAPER_BATCH)
-        per = make_prioritized_replay(capacity, PAPER_BATCH, cfg.per_alpha)
         for n in seed_counts:
-            run, example = replay_scan(
-                per, cfg, HC_OBS_DIM, HC_ACTION_DIM, iters, num_seeds=n if n > 1 else 0
+            seconds = replay_seconds_per_iteration(
+                b, cfg, HC_OBS_DIM, HC_ACTION_DIM, num_seeds=n if n > 1 else 0, iters=iters
             )
-            state = per.init(example)
-            if n > 1:
-                state = jax.vmap(lambda _, p=per, e=example: p.init(e))(jnp.arange(n))
-            holder = {"r": state}
-            del state
-
-            def call(run=run, holder=holder) -> Any:  # noqa: ANN001
-                holder["r"], w = run(holder["r"], jax.random.key(4))
-                return w
-
-            times = summarize([t / iters for t in time_calls(call, b.sizes.repeats)])
-            ms = times["median_s"] * 1e3
+            ms = seconds * 1e3
             out[f"cap_{capacity}_seeds_{n}"] = {
                 "capacity": capacity,
                 "seeds": n,
@@ -938,7 +932,6 @@ def section_replay(b: Bench) -> dict:
                 "ms_per_iteration_per_seed": ms / n,
             }
             rows.append([f"{capacity:,}", n, ms, ms / n])
-            del holder["r"]
     for capacity in capacities:
         one = out[f"cap_{capacity}_seeds_1"]["ms_per_iteration_all_seeds"]
         n = seed_counts[-1]
