@@ -296,7 +296,7 @@ def run_sweep(
     import orbax.checkpoint as ocp
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-    from arld_jax.train import make_train
+    from arld_jax.train import compiler_options, make_train
 
     cfg = sweep.cfg
     expert = None
@@ -330,6 +330,7 @@ def run_sweep(
         jax.vmap(trainer.run_periods, in_axes=(0, 0, None, None)),
         static_argnums=3,
         donate_argnums=0,
+        compiler_options=compiler_options(),
     )
 
     mngr = ocp.CheckpointManager(

@@ -10,15 +10,15 @@ Shape of a run (STYLE.md habit 6):
 
 Everything is pure and jit/vmap-friendly: seeds and sweeps are `jax.vmap(train)` over keys and
 `HParams`. The iteration and period indices come in as scan inputs that are NOT batched under vmap, so
-the `lax.cond`s that skip updates during warm-up and reset envs at episode ends stay real branches
-(not selects that would run both sides) when vmapped over seeds. The resumable driver (`run.py`) calls
-`run_periods` chunk by chunk with the same compiled program.
+the branches that skip updates during warm-up (`only_if`) and reset envs at episode ends (`lax.cond`)
+stay real branches (not selects that would run both sides) when vmapped over seeds. The resumable
+driver (`run.py`) calls `run_periods` chunk by chunk with the same compiled program.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import chex
 import flax.struct
@@ -40,6 +40,29 @@ from arld_jax.evaluate import evaluate_policy
 from arld_jax.expert import Expert
 from arld_jax.replay import ReplayState, make_prioritized_replay, priority_from_td
 from arld_jax.types import Params, PRNGKey, Transition
+
+
+def only_if(pred: jax.Array, fn: Callable[[Any], Any], carry: Any) -> Any:
+    """`fn(carry)` if `pred` else `carry`, as a loop of 0 or 1 trips.
+
+    Used instead of `lax.cond(pred, fn, lambda c: c, carry)` for the big loop-carried state
+    (agent and replay): XLA carries a while loop's state in place, whereas a conditional writes
+    its results to new buffers that the enclosing scan then copies back, the whole AgentState at
+    every iteration (benchmarks/README.md, "Session 5"). Keep `pred` unbatched under `vmap` (it
+    depends only on the iteration index), or the loop becomes a select that runs `fn` always."""
+    return jax.lax.fori_loop(0, pred.astype(jnp.int32), lambda _, c: fn(c), carry)
+
+
+def compiler_options() -> dict[str, Any]:
+    """XLA options for the compiled training programs: `jax.jit(..., compiler_options=...)`.
+
+    On CPU, region-based copy insertion. Without it XLA:CPU copies buffers that nested loops update
+    in place: the sum tree twice per iteration (8 seed-vmapped 1M buffers: 24-32 ms per iteration
+    instead of 2), and the replay's data under `only_if` (benchmarks/README.md, "Session 5"). It
+    changes which copies are made, not what is computed. Other backends: no options."""
+    if jax.default_backend() != "cpu":
+        return {}
+    return {"xla_cpu_copy_insertion_use_region_analysis": True}
 
 
 @flax.struct.dataclass
@@ -184,22 +207,33 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
     ) -> tuple[AgentState, ReplayState, UpdateMetrics]:
         """`updates_per_iter` SAC updates from prioritized replay, priorities refreshed after each.
 
-        During warm-up the agent is not updated (only its TD errors are measured). The branch is a
-        `lax.cond` on the unbatched `warm`, and the replay buffer stays outside it: XLA may copy a
-        conditional's operands, and the buffer is the largest array of the run."""
+        During warm-up the agent is not updated (only its TD errors are measured, so priorities
+        still follow the current critics). Which of the two runs is chosen by `only_if`, a loop of
+        0 or 1 trips on the unbatched `warm`, not by a `lax.cond`: see `only_if` for why."""
         # Importance-sampling exponent annealed linearly from beta0 to 1 (Schaul et al. 2015).
         beta = cfg.per_beta0 + (1.0 - cfg.per_beta0) * it / cfg.num_iterations
+
+        def replay_step(update_fn, k_sample, k_update):  # noqa: ANN001, ANN202
+            def step(carry):  # noqa: ANN001, ANN202
+                agent_state, replay, _ = carry
+                batch, indices, weights = per.sample(replay, k_sample, beta)
+                agent_state, td, metrics = update_fn(agent_state, batch, weights, hp, k_update)
+                # Paper A.1 (DDPGfD): p = delta^2 + eps + eps_d for demonstrations.
+                priorities = priority_from_td(td, batch.is_demo, cfg.per_eps, hp.eps_demo)
+                return agent_state, per.set_priorities(replay, indices, priorities), metrics
+
+            return step
 
         def one_update(carry, k):  # noqa: ANN001, ANN202
             agent_state, replay = carry
             k_sample, k_update = jax.random.split(k)
-            batch, indices, weights = per.sample(replay, k_sample, beta)
-            agent_state, td, metrics = jax.lax.cond(
-                warm, agent.no_update, agent.update, agent_state, batch, weights, hp, k_update
-            )
-            # Paper A.1 (DDPGfD): p = delta^2 + eps + eps_d for demonstrations.
-            priorities = priority_from_td(td, batch.is_demo, cfg.per_eps, hp.eps_demo)
-            return (agent_state, per.set_priorities(replay, indices, priorities)), metrics
+            zero = jnp.zeros(())
+            metrics = UpdateMetrics(zero, zero, jnp.exp(agent_state.log_alpha), zero, zero)
+            carry = (agent_state, replay, metrics)
+            carry = only_if(~warm, replay_step(agent.update, k_sample, k_update), carry)
+            carry = only_if(warm, replay_step(agent.no_update, k_sample, k_update), carry)
+            agent_state, replay, metrics = carry
+            return (agent_state, replay), metrics
 
         keys = jax.random.split(key, cfg.updates_per_iter)
         (agent_state, replay), metrics = jax.lax.scan(one_update, (agent_state, replay), keys)

@@ -52,7 +52,7 @@ from arld_jax.config import Config, hparams_from_config
 from arld_jax.envs import Env, make_env
 from arld_jax.networks import NUM_CRITICS
 from arld_jax.replay import PrioritizedReplay, make_prioritized_replay, replay_nbytes
-from arld_jax.train import Trainer, make_train
+from arld_jax.train import Trainer, compiler_options, make_train
 from arld_jax.types import Transition
 
 SECTIONS: tuple[str, ...] = (
@@ -276,6 +276,7 @@ def machine_info(args: argparse.Namespace) -> dict[str, Any]:
         "devices": [str(d) for d in jax.devices()],
         "load_average_at_start": list(os.getloadavg()),
         "xla_flags": os.environ.get("XLA_FLAGS", ""),
+        "compiler_options": compiler_options(),  # given to every timed program's jax.jit
         "persistent_cache_dir_in_parent": jax.config.jax_compilation_cache_dir,
     }
 
@@ -493,7 +494,7 @@ def env_rollout(env: Env, num_envs: int, steps: int) -> Callable[[jax.Array], ja
         _, rewards = jax.lax.scan(body, state, jax.random.split(k_steps, steps))
         return jnp.sum(rewards)
 
-    return jax.jit(rollout)
+    return jax.jit(rollout, compiler_options=compiler_options())
 
 
 def env_config(env_name: str, num_envs: int) -> Config:
@@ -564,7 +565,7 @@ def update_scan(agent: Agent, num_updates: int) -> Callable[..., Any]:
 
         return jax.lax.scan(body, state, jax.random.split(key, num_updates))
 
-    return jax.jit(run)
+    return jax.jit(run, compiler_options=compiler_options())
 
 
 def updates_per_s(b: Bench, cfg: Config, obs_dim: int, action_dim: int) -> dict:
@@ -658,6 +659,7 @@ def compile_trainer(trainer: Trainer, num_seeds: int) -> tuple[Any, Any, Any, di
         jax.vmap(trainer.run_periods, in_axes=(0, 0, None, None)),
         static_argnums=3,
         donate_argnums=0,
+        compiler_options=compiler_options(),
     )
     start = time.perf_counter()
     lowered = run.lower(state, hps, jnp.int32(0), 1)
@@ -753,7 +755,7 @@ def replay_scan(
         r, w = jax.lax.scan(step, r, jax.random.split(key, iters))
         return r, jnp.sum(w)
 
-    return jax.jit(run, donate_argnums=0), example
+    return jax.jit(run, donate_argnums=0, compiler_options=compiler_options()), example
 
 
 def replay_seconds_per_iteration(
@@ -778,7 +780,7 @@ def replay_seconds_per_iteration(
 
 def evaluate_seconds(b: Bench, trainer: Trainer, actor_params: Any) -> float:
     """Seconds of one `trainer.evaluate` (jitted alone, not vmapped, after a warm-up call)."""
-    evaluate = jax.jit(trainer.evaluate)
+    evaluate = jax.jit(trainer.evaluate, compiler_options=compiler_options())
     return statistics.median(
         time_calls(lambda: evaluate(actor_params, jax.random.key(5)), b.sizes.repeats)
     )

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -11,7 +13,7 @@ from arld_jax import query
 from arld_jax.config import hparams_from_config, tiny
 from arld_jax.envs import toy_target_action
 from arld_jax.expert import Expert
-from arld_jax.train import make_train
+from arld_jax.train import compiler_options, make_train, only_if
 
 TOY_EXPERT = Expert(params={}, act=lambda p, obs, k: toy_target_action(obs), meta={"name": "toy"})
 SEEDS = (0, 1, 2)
@@ -187,3 +189,63 @@ def test_update_before_add_learns_and_keeps_demos():
     assert int(metrics.demos_used[-1]) == cfg.budget
     assert float(jnp.sum(state.replay.data.is_demo)) == cfg.budget
     assert int(state.replay.size) == cfg.replay_capacity
+
+
+def test_only_if_runs_its_function_exactly_when_asked():
+    carry = {"a": jnp.arange(3.0), "n": jnp.int32(4)}
+    double = lambda c: jax.tree.map(lambda x: 2 * x, c)  # noqa: E731
+    run = jax.jit(only_if, static_argnums=1)
+    for pred, factor in ((True, 2), (False, 1)):
+        out = run(jnp.asarray(pred), double, carry)
+        np.testing.assert_array_equal(out["a"], factor * np.arange(3.0))
+        assert int(out["n"]) == 4 * factor
+    # Under vmap over the carry with an unbatched predicate, every row follows the predicate.
+    rows = {"a": jnp.ones((2, 3)), "n": jnp.array([1, 2], jnp.int32)}
+    out = jax.vmap(lambda c: only_if(jnp.asarray(True), double, c))(rows)
+    np.testing.assert_array_equal(out["n"], [2, 4])
+
+
+def _loop_copies(hlo: str) -> list[tuple[int, ...]]:
+    """Shapes of the `copy` instructions in loop bodies and branches of an optimized HLO module.
+
+    Copies inside fusions (layout changes within one kernel) and in the entry computation (once
+    per call) are left out: what is left runs at every iteration."""
+    shapes, comp = [], ""
+    for line in hlo.splitlines():
+        if line and not line[0].isspace() and line.rstrip().endswith("{"):
+            comp = "ENTRY" if line.startswith("ENTRY") else line.split()[0]
+            continue
+        m = re.match(r"\s*(?:ROOT )?%?[\w.\-]+ = \w+\[([\d,]*)\]\S* copy\(", line)
+        if m and comp != "ENTRY" and "fused" not in comp and "wrapped" not in comp:
+            shapes.append(tuple(int(d) for d in m.group(1).split(",") if d))
+    return shapes
+
+
+def test_compiled_loop_copies_neither_the_replay_nor_the_agent_state():
+    """Performance structure, not timing: in the seed-vmapped chunk that run.py compiles, XLA must
+    update the replay and the AgentState in place. Regressions this catches (each seen in session
+    5, benchmarks/README.md): a `lax.cond` around the update copied the whole AgentState at every
+    iteration (about 2x its size in loop copies here), and without `compiler_options()` the sum
+    tree was copied in the loop (at 1M x 8 seeds that made the replay work 12x slower)."""
+    cfg = tiny(replay_capacity=5_000, hidden_sizes=(64, 64))
+    trainer = make_train(cfg)
+    hps = _stack([hparams_from_config(cfg)] * 2)
+    state = jax.jit(jax.vmap(trainer.init))(jax.random.split(jax.random.key(0), 2), hps)
+    run = jax.jit(
+        jax.vmap(trainer.run_periods, in_axes=(0, 0, None, None)),
+        static_argnums=3,
+        compiler_options=compiler_options(),
+    )
+    compiled = run.lower(state, hps, jnp.int32(0), 1).compile()
+    copies = _loop_copies(compiled.as_text())
+    replay_shapes = {tuple(x.shape) for x in jax.tree.leaves(state.replay) if x.ndim > 1}
+    assert not [s for s in copies if s in replay_shapes], (copies, replay_shapes)
+    agent_elements = sum(x.size for x in jax.tree.leaves(state.agent))
+    copied = sum(int(np.prod(s)) for s in copies)
+    assert copied < 0.5 * agent_elements, (copied, agent_elements, copies)
+    # The options change which buffers are copied, never a result: same numbers as without them.
+    plain = jax.jit(jax.vmap(trainer.run_periods, in_axes=(0, 0, None, None)), static_argnums=3)
+    _, want = plain(state, hps, jnp.int32(0), 1)
+    _, got = compiled(state, hps, jnp.int32(0))
+    for name in ("eval_return", "critic_loss", "actor_loss", "uncertainty_trace"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
