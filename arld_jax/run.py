@@ -20,6 +20,7 @@ import difflib
 import inspect
 import json
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -462,7 +463,10 @@ def state_layout(state: Any) -> dict[str, Any]:
     import jax
 
     leaves, treedef = jax.tree.flatten(state)
-    text = str(treedef) + "".join(f"{x.shape[1:]}{x.dtype}" for x in leaves)
+    # MJX's static pytree data prints as "<... object at 0x7f...>": drop the addresses, which
+    # change from process to process (with them, no MJX run could ever resume).
+    structure = re.sub(r" at 0x[0-9a-fA-F]+", "", str(treedef))
+    text = structure + "".join(f"{x.shape[1:]}{x.dtype}" for x in leaves)
     return {"sha256": hashlib.sha256(text.encode()).hexdigest(), "num_leaves": len(leaves)}
 
 

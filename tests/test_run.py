@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import jax
 import numpy as np
 import pytest
 
@@ -168,6 +169,30 @@ def test_checkpoint_of_another_state_layout_is_refused(uninterrupted, tmp_path):
     with pytest.raises(SystemExit, match=r"another layout .* Nothing was overwritten"):
         run.run_sweep(sweep, out, chunk_periods=1, plots=False, log=lambda *a: None)
     assert (out / run.METRICS_FILE).read_bytes() == metrics_before
+
+
+class _Static:
+    """Static pytree data whose repr carries its address, like MJX's `_NumPyArrayHashWrapper`."""
+
+
+class _Node:
+    def __init__(self, x, static):  # noqa: ANN001
+        self.x, self.static = x, static
+
+
+jax.tree_util.register_pytree_node(_Node, lambda n: ((n.x,), n.static), lambda s, c: _Node(c[0], s))
+
+
+def test_state_layout_is_the_same_in_every_process():
+    """The fingerprint must not depend on where objects live: MJX's static pytree data prints as
+    "<... object at 0x...>", and with the address in it no MJX run could resume in a new process
+    (seen in session 5). Equal structure and shapes -> equal fingerprint; other shapes -> not."""
+    a = {"env": _Node(np.zeros((2, 3, 4)), _Static())}
+    b = {"env": _Node(np.zeros((2, 3, 4)), _Static())}
+    assert str(jax.tree.structure(a)) != str(jax.tree.structure(b))  # the addresses differ
+    assert run.state_layout(a) == run.state_layout(b)
+    c = {"env": _Node(np.zeros((2, 3, 5)), _Static())}
+    assert run.state_layout(c) != run.state_layout(a)
 
 
 def test_other_config_in_same_directory_is_refused(uninterrupted):
