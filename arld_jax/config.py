@@ -30,6 +30,11 @@ UNCERTAINTIES: tuple[str, ...] = ("intrinsic", "extrinsic")
 """Uncertainty measures: intrinsic = SAC's sigma_theta(s) (paper 3.2); extrinsic = Noisy SAC's analytic
 variance of the perturbed mean (paper 3.1). Choosing "extrinsic" also makes the agent a Noisy SAC."""
 
+AGENT_NAMES: tuple[str, ...] = ("sac", "td3", "boot_td3")
+"""Agent families (`arld_jax.agents`): SAC (Noisy SAC with uncertainty 'extrinsic'), TD3 (Noisy TD3
+with 'extrinsic'; Fujimoto et al. 2018) and Bootstrapped TD3 (K heads, Osband et al. 2016). One
+compiled program per family; the paper's Fig. 1 compares the TD3 family under ARLD."""
+
 ENVS: tuple[str, ...] = ("halfcheetah", "toy")
 BACKENDS: tuple[str, ...] = ("mjx", "generalized", "positional", "spring")
 REDUCTIONS: tuple[str, ...] = ("mean", "max", "sum")
@@ -64,7 +69,10 @@ class Config:
     num_eval_episodes: int = 5
     """Episodes per evaluation, run in parallel (each from a fresh random initial state)."""
 
-    # ---- SAC (static: shapes and structure) ----
+    # ---- agent (static: shapes and structure) ----
+    agent: str = "sac"
+    """Agent family: 'sac' (SAC / Noisy SAC), 'td3' (TD3 / Noisy TD3) or 'boot_td3' (Bootstrapped
+    TD3). With uncertainty 'extrinsic', sac and td3 are their noisy variants (paper 3.1)."""
     hidden_sizes: tuple[int, ...] = (256, 256)
     """Hidden layer widths of actor and critics (paper A.1: two layers of 256, ReLU)."""
     batch_size: int = 256
@@ -80,8 +88,6 @@ class Config:
     updates do not wait for the env step. Measured on the 2-core CPU with MJX (`benchmarks/bench.py
     --only overlap`) it is SLOWER at 1 env (0.69x, 0.64x on two hosts) and mixed at 16 envs (0.96x,
     1.09x), though 1.4x faster on the toy env; hence off. Kept for accelerators, where the overlap may pay."""
-    autotune_alpha: bool = False
-    """Tune the temperature alpha towards a target entropy (Haarnoja et al. 2018b). The paper fixes 0.2."""
     log_std_min: float = -20.0
     """Lower clip of the actor's log-std head."""
     log_std_max: float = 2.0
@@ -90,6 +96,23 @@ class Config:
     """Initial sigma_w, sigma_b of the Noisy SAC mean head (Fortunato et al. 2017, independent noise)."""
     matmul_dtype: str = "float32"
     """Dtype of matmul inputs in the MLPs ('bfloat16' uses AMX/tensor cores; accumulation stays f32)."""
+
+    # ---- TD3 family (static) ----
+    td3_policy_noise: float = 0.2
+    """Std of the target policy smoothing noise on a' (Fujimoto et al. 2018: 0.2), for td3/boot_td3."""
+    td3_noise_clip: float = 0.5
+    """The smoothing noise is clipped to [-c, c] (Fujimoto et al. 2018: c = 0.5)."""
+    td3_policy_delay: int = 2
+    """d: the actor and both target networks update once every d critic updates (Fujimoto et al.
+    2018: d = 2)."""
+    td3_exploration_noise: float = 0.1
+    """Std of the Gaussian noise added to the actor's action when exploring (Fujimoto et al. 2018:
+    0.1); the action is then clipped to [-1, 1]."""
+    boot_heads: int = 10
+    """K: actor heads and twin-critic heads of Bootstrapped TD3 (Osband et al. 2016: K = 10)."""
+    boot_mask_prob: float = 0.5
+    """p: each head learns from a transition with probability p, a Bernoulli bootstrap mask drawn
+    once per (replay slot, head) (Osband et al. 2016: p = 0.5; p = 1 shares all data)."""
 
     # ---- SAC (sweepable values) ----
     actor_lr: float = 3e-4
@@ -106,6 +129,9 @@ class Config:
     """Multiplier on rewards in the critic target (paper A.1 tunes it per environment)."""
     init_alpha: float = 0.2
     """Entropy temperature (fixed, paper A.1) or its initial value when autotuned."""
+    autotune_alpha: bool = False
+    """Tune the temperature alpha towards the target entropy -dim(A) (Haarnoja et al. 2018b, eq. 18)
+    instead of keeping it at init_alpha (the paper, A.1, fixes 0.2). Sweepable."""
 
     # ---- prioritized replay (paper A.1, Schaul et al. 2015, Vecerik et al. 2017) ----
     per_alpha: float = 0.6
@@ -204,6 +230,7 @@ SWEEPABLE: tuple[str, ...] = (
     "tau",
     "reward_scale",
     "init_alpha",
+    "autotune_alpha",
     "seed",
 )
 """Config fields that one compiled program can vmap over (values, not shapes)."""
@@ -227,6 +254,7 @@ class HParams:
     tau: jnp.ndarray
     reward_scale: jnp.ndarray
     init_alpha: jnp.ndarray
+    autotune_alpha: jnp.ndarray  # float32, 1.0 = tune alpha (eq. 18), 0.0 = fixed
 
 
 def hparams_from_config(cfg: Config) -> HParams:
@@ -247,6 +275,7 @@ def hparams_from_config(cfg: Config) -> HParams:
         tau=jnp.asarray(cfg.tau, f32),
         reward_scale=jnp.asarray(cfg.reward_scale, f32),
         init_alpha=jnp.asarray(cfg.init_alpha, f32),
+        autotune_alpha=jnp.asarray(float(cfg.autotune_alpha), f32),
     )
 
 
@@ -282,6 +311,7 @@ def validate(cfg: Config) -> None:
             _fail(name, value, "an integer >= 1")
     if not isinstance(cfg.env_max_batch, int) or cfg.env_max_batch < -1:
         _fail("env_max_batch", cfg.env_max_batch, "an integer >= 1, 0 (auto) or -1 (no limit)")
+    _choice(cfg, "agent", AGENT_NAMES)
     _choice(cfg, "env_name", ENVS)
     _choice(cfg, "backend", BACKENDS)
     _choice(cfg, "strategy", STRATEGIES)
@@ -326,6 +356,15 @@ def validate(cfg: Config) -> None:
         _fail("log_std_min", cfg.log_std_min, f"< log_std_max ({cfg.log_std_max})")
     if not cfg.noisy_sigma_init >= 0:
         _fail("noisy_sigma_init", cfg.noisy_sigma_init, ">= 0")
+    for name in ("td3_policy_noise", "td3_noise_clip", "td3_exploration_noise"):
+        if not getattr(cfg, name) >= 0:
+            _fail(name, getattr(cfg, name), ">= 0")
+    for name in ("td3_policy_delay", "boot_heads"):
+        value = getattr(cfg, name)
+        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+            _fail(name, value, "an integer >= 1")
+    if not 0 < cfg.boot_mask_prob <= 1:
+        _fail("boot_mask_prob", cfg.boot_mask_prob, "0 < p <= 1")
     for name in ("actor_lr", "critic_lr", "alpha_lr", "reward_scale", "init_alpha"):
         if not getattr(cfg, name) > 0:
             _fail(name, getattr(cfg, name), "> 0")

@@ -10,7 +10,12 @@ iteration index, so the reset costs nothing on the other 999 steps, also under `
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+import os
+import sys
+import tempfile
+import warnings
+from collections.abc import Callable, Iterator
 from typing import Any, NamedTuple
 
 import flax.struct
@@ -18,6 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from arld_jax import gait
 from arld_jax.config import Config
 from arld_jax.types import PRNGKey
 
@@ -37,6 +43,17 @@ class Env(NamedTuple):
     step: Callable[[EnvState, jax.Array], EnvState]  # (state [n], action [n, A]) -> state [n]
     obs_dim: int
     action_dim: int
+    upside_down: Callable[[jax.Array], jax.Array]  # obs [..., obs_dim] -> bool [...] (the gait)
+
+
+def halfcheetah_upside_down(obs: jax.Array) -> jax.Array:
+    """True where the HalfCheetah's torso is upside down (`gait.upside_down`)."""
+    return gait.upside_down(obs, jnp)
+
+
+def never_upside_down(obs: jax.Array) -> jax.Array:
+    """The toy env has no body: never upside down."""
+    return jnp.zeros(obs.shape[:-1], bool)
 
 
 CPU_ENV_MAX_BATCH = 16
@@ -109,10 +126,54 @@ def limit_batch(step: Callable[[EnvState, jax.Array], EnvState], max_batch: int)
     return limited
 
 
-def _brax_env(name: str, backend: str) -> Env:
-    from brax import envs as brax_envs  # imported lazily: the toy env and unit tests do not need it
+# Third-party messages that every run printed and no user can act on: MuJoCo-MJX's optional Warp
+# backend is not installed (printed at import), Brax's notice that its envs are unmaintained (we
+# keep Brax's halfcheetah on purpose, see README), MuJoCo's deprecation of the `settotalmass`
+# attribute in Brax's half_cheetah.xml (printed by MuJoCo's C compiler).
+_THIRD_PARTY_NOISE = (
+    "Failed to import warp",
+    "Failed to import mujoco_warp",
+    "settotalmass",
+    "not actively being maintained",
+)
 
-    env = brax_envs.get_environment(name, backend=backend)
+
+@contextlib.contextmanager
+def _without_third_party_noise() -> Iterator[None]:
+    """Run the block with stdout/stderr captured at the file-descriptor level (MuJoCo's C code
+    writes there directly), then re-print every captured line except `_THIRD_PARTY_NOISE`; an
+    exception in the block re-prints everything, so nothing that explains an error is lost."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = {fd: os.dup(fd) for fd in (1, 2)}
+    with tempfile.TemporaryFile(mode="w+b") as capture, warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*not actively being maintained.*")
+        failed = False
+        try:
+            for fd in (1, 2):
+                os.dup2(capture.fileno(), fd)
+            yield
+        except BaseException:
+            failed = True
+            raise
+        finally:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            for fd, copy in saved.items():
+                os.dup2(copy, fd)
+                os.close(copy)
+            capture.seek(0)
+            for line in capture.read().decode(errors="replace").splitlines():
+                if line.strip() and (failed or not any(n in line for n in _THIRD_PARTY_NOISE)):
+                    print(line, file=sys.stderr)
+
+
+def _brax_env(name: str, backend: str) -> Env:
+    with _without_third_party_noise():
+        # Imported lazily: the toy env and the unit tests do not need Brax.
+        from brax import envs as brax_envs
+
+        env = brax_envs.get_environment(name, backend=backend)
 
     def wrap(s: Any) -> EnvState:
         return EnvState(inner=s, obs=s.obs, reward=s.reward, terminated=s.done)
@@ -123,7 +184,14 @@ def _brax_env(name: str, backend: str) -> Env:
     def step(state: EnvState, action: jax.Array) -> EnvState:
         return wrap(jax.vmap(env.step)(state.inner, action))
 
-    return Env(reset=reset, step=step, obs_dim=env.observation_size, action_dim=env.action_size)
+    upside_down = halfcheetah_upside_down if name == "halfcheetah" else never_upside_down
+    return Env(
+        reset=reset,
+        step=step,
+        obs_dim=env.observation_size,
+        action_dim=env.action_size,
+        upside_down=upside_down,
+    )
 
 
 # A fixed random linear map for the toy env's target action; numpy so it is a compile-time constant.
@@ -153,4 +221,10 @@ def _toy_env() -> Env:
         s_next = jnp.clip(0.9 * s + 0.3 * jnp.concatenate([action, -action], axis=-1), -2.0, 2.0)
         return EnvState(inner=s_next, obs=s_next, reward=reward, terminated=jnp.zeros_like(reward))
 
-    return Env(reset=reset, step=step, obs_dim=_TOY_OBS_DIM, action_dim=_TOY_ACTION_DIM)
+    return Env(
+        reset=reset,
+        step=step,
+        obs_dim=_TOY_OBS_DIM,
+        action_dim=_TOY_ACTION_DIM,
+        upside_down=never_upside_down,
+    )

@@ -17,13 +17,17 @@ def evaluate_policy(
     key: PRNGKey,
     num_episodes: int,
     episode_length: int,
-) -> jax.Array:
+) -> tuple[jax.Array, jax.Array]:
     """Mean undiscounted return of `policy_fn` (obs [n, obs_dim] -> action [n, A]) over `num_episodes`
-    parallel episodes of `episode_length` steps, each from a fresh random initial state."""
+    parallel episodes of `episode_length` steps, each from a fresh random initial state, and the
+    fraction of the visited states that are upside down (`env.upside_down`)."""
 
     def step(state, _):  # noqa: ANN001, ANN202
+        flipped = jnp.mean(env.upside_down(state.obs))
         state = env.step(state, policy_fn(state.obs))
-        return state, state.reward
+        return state, (state.reward, flipped)
 
-    _, rewards = jax.lax.scan(step, env.reset(key, num_episodes), None, length=episode_length)
-    return jnp.mean(jnp.sum(rewards, axis=0))
+    _, (rewards, flipped) = jax.lax.scan(
+        step, env.reset(key, num_episodes), None, length=episode_length
+    )
+    return jnp.mean(jnp.sum(rewards, axis=0)), jnp.mean(flipped)

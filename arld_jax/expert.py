@@ -11,6 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NamedTuple
 
+import flax.struct
 import jax
 import jax.numpy as jnp
 
@@ -21,12 +22,40 @@ META_FILE = "expert.json"
 PARAMS_DIR = "actor"
 
 
+@flax.struct.dataclass
+class ExpertContext:
+    """What the loop knows when it asks the expert, for experts that look beyond the state (a
+    person at the demonstration page, arld_jax.human). All per env [n] unless noted."""
+
+    agent_action: jax.Array  # [n, A] the action the agent proposes
+    uncertainty: jax.Array  # u(s) of the agent
+    is_demo: jax.Array  # bool: the expert acts in this env at this step
+    new_query: bool | jax.Array  # bool: a query (a run of C demonstrated steps) starts here
+    demo_remaining: jax.Array  # i32: demonstrated steps of the current run still to come after this
+    demos_used: jax.Array  # i32[]: budget spent, this step included
+    budget: jax.Array  # i32[]: the run's demonstration budget
+    env_step: jax.Array  # i32[]: env steps done before this step
+
+
 class Expert(NamedTuple):
-    """Expert parameters and a pure acting function act(params, obs [n, d], key) -> action [n, A]."""
+    """Expert parameters and an acting function act(params, obs [n, d], key, context) -> action
+    [n, A]. A saved policy ignores the context; the loop calls `act` only at iterations where
+    some env of the run is demonstrated (a `lax.cond`), so an expert may be slow or a person."""
 
     params: Params
-    act: Callable[[Params, jax.Array, PRNGKey], jax.Array]
+    act: Callable[[Params, jax.Array, PRNGKey, ExpertContext | None], jax.Array]
     meta: dict[str, Any]
+
+
+def toy_expert() -> Expert:
+    """The toy env's optimal policy, known in closed form: the expert of tests and tiny runs."""
+    from arld_jax.envs import toy_target_action
+
+    return Expert(
+        params={},
+        act=lambda p, obs, key, context=None: toy_target_action(obs),
+        meta={"name": "toy"},
+    )
 
 
 def expert_from_actor(
@@ -34,7 +63,9 @@ def expert_from_actor(
 ) -> Expert:
     """Wrap a trained actor. The expert acts with tanh(mu) unless `stochastic`."""
 
-    def act(p: Params, obs: jax.Array, key: PRNGKey) -> jax.Array:
+    def act(
+        p: Params, obs: jax.Array, key: PRNGKey, context: ExpertContext | None = None
+    ) -> jax.Array:
         k_noise, k_sample = jax.random.split(key)
         pol = actor.apply(p, obs, k_noise, jnp.float32(0.0))
         return sample_action(pol, k_sample)[0] if stochastic else deterministic_action(pol)

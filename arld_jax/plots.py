@@ -509,6 +509,39 @@ def fig9_budget(run: Run) -> Figure | None:
     return fig
 
 
+def fig_gait(run: Run) -> Figure | None:
+    """The gait: % of visited training states (left) and of evaluation states (right) with the
+    torso upside down, per period and cell, mean and 95% CI over seeds. A run that learned the
+    flipped local optimum sits near 100% (`gait.upside_down`). HalfCheetah runs with the metric only."""
+    metrics = run["metrics"]
+    env_name = run["config"].get("config", {}).get("env_name")
+    if run["periods"] == 0 or "upside_down" not in metrics or env_name != "halfcheetah":
+        return None
+    cells = group_cells(run)
+    colors = _cell_colors(cells)
+    steps = env_steps_axis(run)
+    panels = [("upside_down", "visited training states"), ("eval_upside_down", "evaluation")]
+    panels = [(k, t) for k, t in panels if k in metrics]
+    fig, axes = _new_figure(ncols=len(panels))
+    for ax, (name, title) in zip(axes, panels, strict=True):
+        for cell in cells:
+            mean, half = mean_ci95_columns(100.0 * metrics[name][cell["runs"]])
+            color = colors[cell["cell"]]
+            ax.plot(steps, mean, color=color, lw=1.5, label=cell_name(run, cell))
+            band = np.isfinite(half)
+            if band.any():
+                ax.fill_between(
+                    steps, mean - half, mean + half, where=band, color=color, alpha=0.18, lw=0
+                )
+        ax.set_ylim(-3, 103)
+        ax.set_ylabel("% of states upside down (|pitch| > 90°)")
+        ax.set_title(f"Gait: {title}", fontsize=10)
+        _steps_axis(ax)
+        _legend(ax)
+    fig.suptitle("Upside-down (flipped) gait, mean and 95% CI over seeds" + _partial_note(run))
+    return fig
+
+
 FIGURES: dict[str, Callable[[Run], Figure | None]] = {
     "fig3_uncertainty": fig3_uncertainty,
     "fig4_5_returns": fig4_5_returns,
@@ -516,6 +549,7 @@ FIGURES: dict[str, Callable[[Run], Figure | None]] = {
     "fig7_active": fig7_active,
     "fig8_states": fig8_states,
     "fig9_budget": fig9_budget,
+    "gait": fig_gait,
 }
 """File stem -> figure function, in paper order."""
 

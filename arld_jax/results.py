@@ -32,6 +32,8 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from arld_jax import gait
+
 REQUIRED_FILES: tuple[str, ...] = ("config.json", "runs.json", "metrics.npz")
 """Files a run directory must have before it can be summarised or plotted."""
 
@@ -43,6 +45,9 @@ STAT_COLUMNS: tuple[str, ...] = (
     "auc_ci95",
     "demos_used_mean",
     "demos_used_ci95",
+    "upside_down_late_mean",
+    "upside_down_late_ci95",
+    "upside_down_source",
     "expert_return",
     "env_steps_per_second",
     "periods",
@@ -256,6 +261,33 @@ def expert_return(run: dict[str, Any]) -> float:
     return float(value) if value is not None else math.nan
 
 
+def upside_down_late(run: dict[str, Any]) -> tuple[np.ndarray, str]:
+    """[R] fraction of visited training states upside down in the last 30% of the periods present
+    (`gait.LATE_FRACTION`), and where it came from: "periods" (the per-period metric
+    `upside_down`), "sample" (runs recorded before that metric existed: the saved uniform sample
+    of visited states, those seen in the last 30% of the env steps present) or "n/a" (no data, or
+    not HalfCheetah)."""
+    metrics = run["metrics"]
+    num_runs, periods = run["metrics"]["eval_return"].shape[:2]
+    nan = np.full(num_runs, np.nan)
+    if periods == 0:
+        return nan, "n/a"
+    if "upside_down" in metrics:
+        late = max(1, math.ceil(gait.LATE_FRACTION * periods))
+        return np.mean(np.asarray(metrics["upside_down"], np.float64)[:, -late:], axis=1), "periods"
+    env_name = run["config"].get("config", {}).get("env_name")
+    if env_name != "halfcheetah" or "visited_obs" not in metrics:
+        return nan, "n/a"
+    last = env_steps_axis(run)[-1]
+    late = (metrics["visited_valid"]) & (
+        metrics["visited_env_step"] > (1.0 - gait.LATE_FRACTION) * last
+    )
+    flipped = gait.upside_down(np.asarray(metrics["visited_obs"], np.float64))
+    counts = late.sum(axis=1)
+    out = np.where(counts > 0, (flipped & late).sum(axis=1) / np.maximum(counts, 1), np.nan)
+    return out, "sample"
+
+
 # -------------------------------------------------------------------------------------------------
 # summary
 # -------------------------------------------------------------------------------------------------
@@ -277,6 +309,7 @@ def summarize(run_dir: str | Path | dict[str, Any]) -> list[dict[str, Any]]:
     eval_return = np.asarray(metrics["eval_return"], dtype=np.float64)
     auc = area_under_curve(eval_return, steps)
     demos = metrics.get("demos_used")
+    flipped, flipped_source = upside_down_late(run)
     expert = expert_return(run)
     sps = float(run["timing"].get("env_steps_per_second", math.nan))
     periods = run["periods"]
@@ -298,6 +331,8 @@ def summarize(run_dir: str | Path | dict[str, Any]) -> list[dict[str, Any]]:
         row["final_return_mean"], row["final_return_ci95"] = mean_ci95(final)
         row["auc_mean"], row["auc_ci95"] = mean_ci95(auc[idx])
         row["demos_used_mean"], row["demos_used_ci95"] = mean_ci95(final_demos)
+        row["upside_down_late_mean"], row["upside_down_late_ci95"] = mean_ci95(flipped[idx])
+        row["upside_down_source"] = flipped_source
         row["expert_return"] = expert
         row["env_steps_per_second"] = sps
         row["periods"] = int(periods)
@@ -324,6 +359,13 @@ def format_mean_ci(mean: float, ci: float) -> str:
             decimals = min(4, max(0, 2 - math.floor(math.log10(magnitude))))
     ci_text = f"{ci:.{decimals}f}" if math.isfinite(ci) else "n/a"
     return f"{mean:.{decimals}f} ± {ci_text}"
+
+
+def _format_percent(mean: float, ci: float) -> str:
+    """A fraction as "mean ± ci %", or n/a."""
+    if not math.isfinite(mean):
+        return "n/a"
+    return f"{100 * mean:.0f} ± {100 * ci:.0f} %" if math.isfinite(ci) else f"{100 * mean:.0f} %"
 
 
 def _format_field(value: Any) -> str:
@@ -372,7 +414,15 @@ def _markdown(run: dict[str, Any], rows: list[dict[str, Any]]) -> str:
         "Cells are mean ± half-width of the 95% confidence interval of the mean over seeds "
         "(Student's t, n − 1 dof; n/a with one seed). Final return: evaluation return at the last "
         "evaluation present. AUC: mean evaluation return over all evaluation points present. "
-        "Demos: cumulative demonstrated env steps at the end.",
+        "Demos: cumulative demonstrated env steps at the end. Upside down: % of the visited "
+        "training states with the torso upside down (|pitch| > 90°) in the last 30% of the "
+        "periods present (the flipped gait; HalfCheetah only)."
+        + (
+            " Here from the saved sample of visited states (recorded before the per-period "
+            "metric existed)."
+            if rows and rows[0]["upside_down_source"] == "sample"
+            else ""
+        ),
         "",
     ]
     if config.get("command"):
@@ -386,6 +436,7 @@ def _markdown(run: dict[str, Any], rows: list[dict[str, Any]]) -> str:
         "final return",
         "AUC (mean return)",
         "demos used",
+        "upside down (last 30%)",
     ]
     lines.append("| " + " | ".join(columns) + " |")
     text_columns = {"label"} | {f for f in fields if any(isinstance(row[f], str) for row in rows)}
@@ -398,6 +449,7 @@ def _markdown(run: dict[str, Any], rows: list[dict[str, Any]]) -> str:
             format_mean_ci(row["final_return_mean"], row["final_return_ci95"]),
             format_mean_ci(row["auc_mean"], row["auc_ci95"]),
             format_mean_ci(row["demos_used_mean"], row["demos_used_ci95"]),
+            _format_percent(row["upside_down_late_mean"], row["upside_down_late_ci95"]),
         ]
         lines.append("| " + " | ".join(values) + " |")
     return "\n".join(lines) + "\n"

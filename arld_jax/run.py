@@ -20,7 +20,6 @@ import difflib
 import inspect
 import json
 import os
-import re
 import sys
 import time
 from pathlib import Path
@@ -83,16 +82,30 @@ def parse_value(name: str, text: str) -> Any:
         raise SystemExit(f"error: --{name} {text!r} is not a valid {kind}") from None
 
 
+def _non_negative_int(option: str, text: str) -> int:
+    """An integer >= 0 from the command line, or a clear error naming the option."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise SystemExit(
+            f"error: --{option} got {text!r}: expected integers >= 0"
+            + (", comma-separated (e.g. --seeds 0,1,2)" if option == "seeds" else "")
+        )
+    return value
+
+
 def apply_overrides(base: Sweep, overrides: dict[str, str], full_grid: bool = False) -> Sweep:
     """Apply --FIELD VALUE overrides: a comma list on a sweepable field sweeps it. `full_grid`
     keeps cells that differ only in fields their strategy ignores (see `sweep.RELEVANT_FOR`)."""
     fields, sweep, seeds = {}, dict(base.sweep), base.seeds
     for name, text in overrides.items():
         if name == "seeds":
-            seeds = tuple(int(s) for s in text.split(",") if s)
+            seeds = tuple(_non_negative_int("seeds", s) for s in text.split(",") if s.strip())
             continue
         if name == "num_seeds":
-            seeds = tuple(range(int(text)))
+            seeds = tuple(range(_non_negative_int("num_seeds", text)))
             continue
         parts = [p for p in text.split(",")] if name != "hidden_sizes" else [text]
         values = [parse_value(name, p) for p in parts]
@@ -413,12 +426,11 @@ def run_sweep(
 
 
 def _expert_for(cfg: Config):  # noqa: ANN202
-    from arld_jax.envs import make_env, toy_target_action
-    from arld_jax.expert import Expert, load_expert, read_expert_meta
+    from arld_jax.envs import make_env
+    from arld_jax.expert import load_expert, read_expert_meta, toy_expert
 
     if cfg.env_name == "toy" and cfg.expert_path is None:
-        # The toy env's optimal policy is known in closed form: it is the toy expert.
-        return Expert(params={}, act=lambda p, obs, k: toy_target_action(obs), meta={"name": "toy"})
+        return toy_expert()
     if cfg.expert_path is None:
         raise SystemExit(
             "error: a query strategy other than 'none' needs an expert: set --expert_path "
@@ -454,20 +466,19 @@ def to_checkpoint(state: Any) -> dict[str, Any]:
 
 
 def state_layout(state: Any) -> dict[str, Any]:
-    """A fingerprint of the state's tree structure (parameter names included) and leaf shapes and
-    dtypes. The checkpoint stores leaves by position, so a run saved by code with another state
-    layout (e.g. before the twin critics became `q0`/`q1`) must not be restored into this one.
+    """A fingerprint of the state's leaves: each leaf's path (field and parameter names), shape and
+    dtype, in order. The checkpoint stores leaves by position, so a run saved by code with another
+    state layout (e.g. before the twin critics became `q0`/`q1`) must not be restored into this one.
+    Class names and static pytree data are not part of it (MJX's print with object addresses that
+    change from process to process), so code that keeps the leaves keeps its runs resumable.
     The leading (runs) axis is left out: its padding depends on the device count, not the code."""
     import hashlib
 
     import jax
 
-    leaves, treedef = jax.tree.flatten(state)
-    # MJX's static pytree data prints as "<... object at 0x7f...>": drop the addresses, which
-    # change from process to process (with them, no MJX run could ever resume).
-    structure = re.sub(r" at 0x[0-9a-fA-F]+", "", str(treedef))
-    text = structure + "".join(f"{x.shape[1:]}{x.dtype}" for x in leaves)
-    return {"sha256": hashlib.sha256(text.encode()).hexdigest(), "num_leaves": len(leaves)}
+    flat, _ = jax.tree_util.tree_flatten_with_path(state)
+    text = "".join(f"{jax.tree_util.keystr(path)}{x.shape[1:]}{x.dtype};" for path, x in flat)
+    return {"sha256": hashlib.sha256(text.encode()).hexdigest(), "num_leaves": len(flat)}
 
 
 def _layout_error(out: Path, done: int, why: str) -> str:
@@ -554,6 +565,11 @@ def export_expert(run_dir: Path, out: Path) -> Path:
     saved = json.loads((run_dir / "config.json").read_text())
     cfg_dict = dict(saved["config"], hidden_sizes=tuple(saved["config"]["hidden_sizes"]))
     cfg = Config(**cfg_dict)
+    if cfg.agent != "sac":
+        raise SystemExit(
+            f"error: {run_dir} trained agent {cfg.agent!r}; the expert is a SAC actor (paper A.1: "
+            "a pre-trained prioritized SAC model), export a run of agent 'sac'"
+        )
     mngr = ocp.CheckpointManager((run_dir / CHECKPOINT_DIR).absolute())
     step = mngr.latest_step()
     if step is None:

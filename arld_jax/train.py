@@ -26,20 +26,13 @@ import jax
 import jax.numpy as jnp
 
 from arld_jax import query
-from arld_jax.agent import (
-    AgentState,
-    UpdateMetrics,
-    act,
-    act_deterministic,
-    make_agent,
-    uncertainty,
-)
+from arld_jax.agents import Agent, AgentState, UpdateMetrics, make_agent
 from arld_jax.config import Config, HParams
 from arld_jax.envs import EnvState, make_env
 from arld_jax.evaluate import evaluate_policy
-from arld_jax.expert import Expert
+from arld_jax.expert import Expert, ExpertContext
 from arld_jax.replay import ReplayState, make_prioritized_replay, priority_from_td
-from arld_jax.types import Params, PRNGKey, Transition
+from arld_jax.types import PRNGKey, Transition
 
 
 def only_if(pred: jax.Array, fn: Callable[[Any], Any], carry: Any) -> Any:
@@ -106,7 +99,6 @@ class TrainState:
     replay: ReplayState
     env: EnvState
     query: query.QueryState
-    expert_params: Params
     episode_return: jax.Array  # [num_envs] running return of the current training episodes
     visited: StateSample  # uniform sample of visited states
     queried: StateSample  # uniform sample of states where a query started
@@ -122,6 +114,7 @@ class IterationOutput:
     demos_used: jax.Array  # cumulative demonstrated steps
     new_queries: jax.Array  # queries started at this iteration
     finished_return: jax.Array  # mean return of episodes ending here (nan if none)
+    upside_down: jax.Array  # fraction of envs whose state is upside down (the gait)
     learning: jax.Array  # gradient updates ran at this iteration
     update: UpdateMetrics  # mean over this iteration's updates (zeros in warm-up)
 
@@ -132,7 +125,9 @@ class PeriodMetrics:
 
     env_steps: jax.Array  # env steps done at the end of the period
     eval_return: jax.Array  # mean return of the deterministic policy tanh(mu)
+    eval_upside_down: jax.Array  # fraction of the evaluation's states that are upside down
     train_return: jax.Array  # mean return of training episodes finished in the period (nan if none)
+    upside_down: jax.Array  # fraction of the visited training states that are upside down (gait)
     critic_loss: jax.Array
     actor_loss: jax.Array
     alpha: jax.Array
@@ -151,7 +146,8 @@ class Trainer(NamedTuple):
     init: Callable[[PRNGKey, HParams], TrainState]
     run_periods: Callable[[TrainState, HParams, jax.Array, int], tuple[TrainState, PeriodMetrics]]
     train: Callable[[PRNGKey, HParams], tuple[TrainState, PeriodMetrics]]
-    evaluate: Callable[[Params, PRNGKey], jax.Array]
+    evaluate: Callable[[AgentState, PRNGKey], tuple[jax.Array, jax.Array]]
+    agent: Agent
     cfg: Config
     obs_dim: int
     action_dim: int
@@ -169,10 +165,18 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
     num_envs, length = cfg.num_envs, cfg.episode_length
     has_expert = expert is not None
 
-    def expert_act(params: Params, obs: jax.Array, key: PRNGKey) -> jax.Array:
+    def expert_act(obs: jax.Array, key: PRNGKey, context: ExpertContext) -> jax.Array:
+        """The expert's actions, asked only when some env of the run is demonstrated (a real
+        branch for one run; under vmap a select, which is what a saved policy costs anyway).
+        Its parameters are constants closed over, not loop state."""
+        zeros = jnp.zeros((obs.shape[0], env.action_dim))
         if expert is None:
-            return jnp.zeros((obs.shape[0], env.action_dim))
-        return expert.act(params, obs, key)
+            return zeros
+        return jax.lax.cond(
+            jnp.any(context.is_demo),
+            lambda: expert.act(expert.params, obs, key, context).astype(zeros.dtype),
+            lambda: zeros,
+        )
 
     def init(key: PRNGKey, hp: HParams) -> TrainState:
         k_agent, k_env, k_run = jax.random.split(key, 3)
@@ -190,7 +194,6 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
             replay=per.init(example),
             env=env.reset(k_env, num_envs),
             query=query.init_query_state(num_envs, cfg.window_size),
-            expert_params=expert.params if expert is not None else {},
             episode_return=jnp.zeros(num_envs),
             visited=init_state_sample(cfg.state_sample_size, env.obs_dim),
             queried=init_state_sample(cfg.state_sample_size, env.obs_dim),
@@ -217,7 +220,9 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
             def step(carry):  # noqa: ANN001, ANN202
                 agent_state, replay, _ = carry
                 batch, indices, weights = per.sample(replay, k_sample, beta)
-                agent_state, td, metrics = update_fn(agent_state, batch, weights, hp, k_update)
+                agent_state, td, metrics = update_fn(
+                    agent_state, batch, weights, indices, hp, k_update
+                )
                 # Paper A.1 (DDPGfD): p = delta^2 + eps + eps_d for demonstrations.
                 priorities = priority_from_td(td, batch.is_demo, cfg.per_eps, hp.eps_demo)
                 return agent_state, per.set_priorities(replay, indices, priorities), metrics
@@ -227,9 +232,7 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
         def one_update(carry, k):  # noqa: ANN001, ANN202
             agent_state, replay = carry
             k_sample, k_update = jax.random.split(k)
-            zero = jnp.zeros(())
-            metrics = UpdateMetrics(zero, zero, jnp.exp(agent_state.log_alpha), zero, zero)
-            carry = (agent_state, replay, metrics)
+            carry = (agent_state, replay, UpdateMetrics.zeros())  # one only_if below writes it
             carry = only_if(~warm, replay_step(agent.update, k_sample, k_update), carry)
             carry = only_if(warm, replay_step(agent.no_update, k_sample, k_update), carry)
             agent_state, replay, metrics = carry
@@ -248,18 +251,29 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
         )
         obs = state.env.obs  # [num_envs, obs_dim]
         warm = it < cfg.warmup_iters
-        agent_action, policy = act(agent, state.agent.actor_params, obs, k_act, hp.noisy)
+        acting = agent.act(state.agent, obs, k_act, hp)
+        agent_action = acting.action
         random_action = jax.random.uniform(k_rand, agent_action.shape, minval=-1.0, maxval=1.0)
         agent_action = jnp.where(warm, random_action, agent_action)
 
         # Query: per-env mask; the expert's action replaces the agent's where it is set.
-        u = uncertainty(policy, hp.noisy, cfg.uncertainty_reduce)  # [num_envs]
+        u = acting.uncertainty  # [num_envs]
         t = it % length
         allow = has_expert & (cfg.query_during_warmup | ~warm)
         qstate, is_demo, new_query = query.query_step(
             state.query, k_query, u, length - t, hp, allow, cfg.window_records
         )
-        expert_action = expert_act(state.expert_params, obs, k_expert)
+        context = ExpertContext(
+            agent_action=agent_action,
+            uncertainty=u,
+            is_demo=is_demo,
+            new_query=new_query,
+            demo_remaining=qstate.demo_remaining,
+            demos_used=qstate.demos_used,
+            budget=hp.budget,
+            env_step=it * num_envs,
+        )
+        expert_action = expert_act(obs, k_expert, context)
         action = jnp.where(is_demo[:, None], expert_action, agent_action)
         chex.assert_shape(action, (num_envs, env.action_dim))
 
@@ -291,6 +305,12 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
             next_env = jax.lax.cond(
                 episode_end, lambda: env.reset(k_reset, num_envs), lambda: next_env
             )
+            # The agent's per-episode state (Bootstrapped TD3's acting head); in place (only_if).
+            agent_state = only_if(
+                episode_end,
+                lambda s: agent.begin_episode(s, jax.random.fold_in(k_reset, 1)),
+                agent_state,
+            )
         episode_return = jnp.where(episode_end, 0.0, episode_return)
 
         env_step = (it + 1) * num_envs
@@ -300,7 +320,6 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
             replay=replay,
             env=next_env,
             query=qstate,
-            expert_params=state.expert_params,
             episode_return=episode_return,
             visited=add_to_state_sample(state.visited, k_vis, obs, all_envs, env_step),
             queried=add_to_state_sample(state.queried, k_qry, obs, new_query, env_step),
@@ -308,18 +327,19 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
         )
         out = IterationOutput(
             uncertainty=jnp.mean(u),
-            sigma=jnp.mean(jnp.exp(policy.log_std)),
+            sigma=jnp.mean(acting.sigma),
             demos_used=qstate.demos_used,
             new_queries=jnp.sum(new_query).astype(jnp.int32),
             finished_return=finished_return,
+            upside_down=jnp.mean(env.upside_down(obs)),
             learning=~warm,
             update=update_metrics,
         )
         return new_state, out
 
-    def evaluate(actor_params: Params, key: PRNGKey) -> jax.Array:
-        """Mean return of the deterministic policy tanh(mu(s))."""
-        policy_fn = lambda obs: act_deterministic(agent, actor_params, obs)  # noqa: E731
+    def evaluate(agent_state: AgentState, key: PRNGKey) -> tuple[jax.Array, jax.Array]:
+        """Mean return of the agent's deterministic policy, and its upside-down fraction."""
+        policy_fn = lambda obs: agent.act_deterministic(agent_state, obs)  # noqa: E731
         return evaluate_policy(env, policy_fn, key, cfg.num_eval_episodes, length)
 
     def period(state: TrainState, p: jax.Array, hp: HParams) -> tuple[TrainState, PeriodMetrics]:
@@ -329,16 +349,18 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
         key, k_eval = jax.random.split(state.key)
         state = state.replace(key=key)
         with jax.named_scope("evaluate"):
-            eval_return = evaluate(state.agent.actor_params, k_eval)
+            eval_return, eval_upside_down = evaluate(state.agent, k_eval)
         traces = cfg.traces_per_eval
         learning = out.learning
         finished = ~jnp.isnan(out.finished_return)
         metrics = PeriodMetrics(
             env_steps=(p + 1) * cfg.eval_every,
             eval_return=eval_return,
+            eval_upside_down=eval_upside_down,
             train_return=jnp.where(
                 jnp.any(finished), _masked_mean(out.finished_return, finished), jnp.nan
             ),
+            upside_down=jnp.mean(out.upside_down),
             critic_loss=_masked_mean(out.update.critic_loss, learning),
             actor_loss=_masked_mean(out.update.actor_loss, learning),
             alpha=out.update.alpha[-1],
@@ -380,6 +402,7 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
         run_periods=run_periods,
         train=train,
         evaluate=evaluate,
+        agent=agent,
         cfg=cfg,
         obs_dim=env.obs_dim,
         action_dim=env.action_dim,

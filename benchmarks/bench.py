@@ -47,7 +47,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from arld_jax.agent import Agent, make_agent
+from arld_jax.agents import Agent, make_agent
 from arld_jax.config import Config, hparams_from_config
 from arld_jax.envs import Env, make_env
 from arld_jax.networks import NUM_CRITICS
@@ -433,7 +433,8 @@ def section_flops(b: Bench) -> dict:
     """FLOPs of one SAC update at B=256, 2x256 (obs 17, action 6), and the updates/s it allows."""
     cfg = Config(hidden_sizes=PAPER_HIDDEN, batch_size=PAPER_BATCH)
     agent, state, batch, weights, hp = agent_and_inputs(cfg, HC_OBS_DIM, HC_ACTION_DIM)
-    lowered = jax.jit(agent.update).lower(state, batch, weights, hp, jax.random.key(1))
+    indices = jnp.arange(weights.shape[0])
+    lowered = jax.jit(agent.update).lower(state, batch, weights, indices, hp, jax.random.key(1))
     from_xla = xla_flops(lowered.compile())
     analytic = analytic_update_flops(HC_OBS_DIM, HC_ACTION_DIM, PAPER_HIDDEN, PAPER_BATCH)
     f32, bf16 = matmul_gflops(b, "float32"), matmul_gflops(b, "bfloat16")
@@ -560,7 +561,7 @@ def update_scan(agent: Agent, num_updates: int) -> Callable[..., Any]:
 
     def run(state: Any, batch: Transition, weights: jax.Array, hp: Any, key: jax.Array) -> Any:
         def body(s: Any, k: jax.Array) -> tuple[Any, jax.Array]:
-            s, _, metrics = agent.update(s, batch, weights, hp, k)
+            s, _, metrics = agent.update(s, batch, weights, jnp.arange(weights.shape[0]), hp, k)
             return s, metrics.critic_loss
 
         return jax.lax.scan(body, state, jax.random.split(key, num_updates))
@@ -695,7 +696,7 @@ def time_periods(trainer: Trainer, num_seeds: int, max_timed: int) -> dict:
         "env_steps_per_s": cfg.eval_every * num_seeds / period_s,
         "updates_per_s": updates / period_s,
         "last_eval_return": float(jnp.mean(metrics.eval_return)),
-        "_actor_params": jax.tree.map(lambda x: x[0], state.agent.actor_params),
+        "_agent_state": jax.tree.map(lambda x: x[0], state.agent),
     }
 
 
@@ -778,11 +779,11 @@ def replay_seconds_per_iteration(
     return statistics.median(time_calls(call, b.sizes.repeats)) / iters
 
 
-def evaluate_seconds(b: Bench, trainer: Trainer, actor_params: Any) -> float:
+def evaluate_seconds(b: Bench, trainer: Trainer, agent_state: Any) -> float:
     """Seconds of one `trainer.evaluate` (jitted alone, not vmapped, after a warm-up call)."""
     evaluate = jax.jit(trainer.evaluate, compiler_options=compiler_options())
     return statistics.median(
-        time_calls(lambda: evaluate(actor_params, jax.random.key(5)), b.sizes.repeats)
+        time_calls(lambda: evaluate(agent_state, jax.random.key(5)), b.sizes.repeats)
     )
 
 
@@ -796,7 +797,7 @@ def period_breakdown(b: Bench, trainer: Trainer, timing: dict) -> dict:
     obs_dim, action_dim = trainer.obs_dim, trainer.action_dim
     iters = cfg.iters_per_eval
     parts = {
-        "evaluation": evaluate_seconds(b, trainer, timing["_actor_params"]),
+        "evaluation": evaluate_seconds(b, trainer, timing["_agent_state"]),
         "env": cfg.eval_every / env_steps_per_s(b, cfg.env_name, cfg.num_envs)["env_steps_per_s"],
         "updates": iters
         * cfg.updates_per_iter

@@ -57,3 +57,20 @@ def test_limited_step_runs_in_chunks():
     seen.clear()
     jax.make_jaxpr(limited)(states[0], actions[0])
     assert seen == [2]
+
+
+def test_building_halfcheetah_prints_no_third_party_noise():
+    """Every run used to print MuJoCo-MJX's 'Failed to import warp', Brax's maintenance notice and
+    MuJoCo's 'settotalmass' deprecation; a new process building the env prints none of them."""
+    import subprocess
+    import sys
+
+    code = (
+        "from arld_jax.config import Config; from arld_jax.envs import make_env; "
+        "print('obs_dim', make_env(Config()).obs_dim)"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "obs_dim 17"
+    for noise in ("warp", "settotalmass", "not actively being maintained"):
+        assert noise not in done.stdout + done.stderr, done.stdout + done.stderr

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from arld_jax import agent as agent_lib
 from arld_jax import config, losses, networks
+from arld_jax.agents import base as agent_base
+from arld_jax.agents import sac as agent_lib
 from arld_jax.types import Transition
 
 # vmapped over a batch exactly as agent.py does it.
@@ -194,7 +195,7 @@ def test_polyak_on_a_small_tree() -> None:
     #                                          b: 0.9*4 + 0.1*0 = 3.6
     target = {"a": jnp.array([0.0, 10.0]), "b": jnp.array(4.0)}
     online = {"a": jnp.array([1.0, 0.0]), "b": jnp.array(0.0)}
-    new = agent_lib.polyak(target, online, 0.1)
+    new = agent_base.polyak(target, online, 0.1)
     np.testing.assert_allclose(new["a"], [0.1, 9.0], rtol=1e-6)
     np.testing.assert_allclose(new["b"], 3.6, rtol=1e-6)
 
@@ -215,12 +216,16 @@ class _Compiled:
 
     def __init__(self, autotune: bool) -> None:
         cfg = _cfg(autotune)
-        self.agent = agent_lib.make_agent(cfg, OBS_DIM, ACTION_DIM)
+        self.agent = agent_lib.make(cfg, OBS_DIM, ACTION_DIM)
         self.hp = config.hparams_from_config(cfg)
-        self.update = jax.jit(self.agent.update)
+        self._update = jax.jit(self.agent.update)
         self._init = jax.jit(self.agent.init)  # one compile instead of op-by-op dispatch
 
-    def init(self) -> agent_lib.AgentState:
+    def update(self, state, batch, weights, hp, key):  # noqa: ANN001, ANN201
+        """The agent's update; SAC ignores the replay indices (no bootstrap masks)."""
+        return self._update(state, batch, weights, jnp.arange(weights.shape[0]), hp, key)
+
+    def init(self) -> agent_lib.SACState:
         return self._init(jax.random.key(0), self.hp)
 
 
@@ -333,7 +338,8 @@ def test_no_update_measures_the_same_td_and_changes_nothing(fixed_alpha_agent: _
     state = a.init()
     batch, weights = _batch()
     key = jax.random.key(5)
-    kept, td0, metrics = jax.jit(a.agent.no_update)(state, batch, weights, a.hp, key)
+    idx = jnp.arange(weights.shape[0])
+    kept, td0, metrics = jax.jit(a.agent.no_update)(state, batch, weights, idx, a.hp, key)
     _, td1, _ = a.update(state, batch, weights, a.hp, key)
     np.testing.assert_allclose(td0, td1, rtol=1e-5, atol=1e-6)
     assert np.max(np.abs(np.asarray(td0))) > 0.1  # rewards ~2 vs Q ~0: a real TD error
@@ -341,3 +347,19 @@ def test_no_update_measures_the_same_td_and_changes_nothing(fixed_alpha_agent: _
         np.testing.assert_array_equal(got, want)
     assert float(metrics.critic_loss) == float(metrics.actor_loss) == 0.0
     np.testing.assert_allclose(metrics.alpha, INIT_ALPHA, rtol=1e-6)
+
+
+def test_autotune_is_a_sweepable_value(fixed_alpha_agent: _Compiled) -> None:
+    """One compiled update vmapped over hp.autotune_alpha = (0, 1): the run with 0 keeps alpha at
+    its initial value, the run with 1 moves it (so fixed and tuned cells share one program)."""
+    a = fixed_alpha_agent
+    state = a.init()
+    batch, weights = _batch()
+    hps = jax.tree.map(lambda x: jnp.stack([x, x]), a.hp)
+    hps = hps.replace(autotune_alpha=jnp.array([0.0, 1.0]))
+    states = jax.tree.map(lambda x: jnp.stack([x, x]), state)
+    update = jax.jit(jax.vmap(a.agent.update, in_axes=(0, None, None, None, 0, None)))
+    new, _, _ = update(states, batch, weights, jnp.arange(weights.shape[0]), hps, jax.random.key(0))
+    alphas = np.exp(np.asarray(new.log_alpha))
+    np.testing.assert_allclose(alphas[0], INIT_ALPHA, rtol=1e-6)
+    assert abs(alphas[1] - INIT_ALPHA) > 1e-5

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from arld_jax import agent as agent_lib
 from arld_jax import networks
+from arld_jax.agents import sac as agent_lib
 
 OBS_DIM, ACTION_DIM, HIDDEN = 4, 3, (8, 8)
 NUM_SAMPLES = 20_000

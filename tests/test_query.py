@@ -485,7 +485,7 @@ def toy_run():  # noqa: ANN201
         window_size=8,
         state_sample_size=4,
     )
-    ex = expert.Expert(params={}, act=lambda p, obs, k: envs.toy_target_action(obs), meta={})
+    ex = expert.toy_expert()
     trainer = train.make_train(cfg, ex)
     state, metrics = jax.jit(trainer.train)(jax.random.key(0), config.hparams_from_config(cfg))
     return cfg, state, metrics

@@ -234,6 +234,9 @@ def test_write_summary_csv_schema_and_markdown(run_dir: Path) -> None:
         "auc_ci95",
         "demos_used_mean",
         "demos_used_ci95",
+        "upside_down_late_mean",
+        "upside_down_late_ci95",
+        "upside_down_source",
         "expert_return",
         "env_steps_per_second",
         "periods",
@@ -346,7 +349,7 @@ def test_plot_all_full_sweep_has_every_figure_and_split_panels(tmp_path: Path) -
     }
     run_dir = write_run_dir(tmp_path / "full", cells, sweep, periods=3, total_periods=4)
     paths = {p.stem: p for p in plots.plot_all(run_dir)}
-    assert set(paths) == set(plots.FIGURES)
+    assert set(paths) == set(plots.FIGURES) - {"gait"}  # the toy env has no gait
     assert all(_png_ok(p) for p in paths.values())
     # both uncertainty measures present -> Fig. 4 and Fig. 5 side by side (a wide image)
     height, width = imread(paths["fig4_5_returns"]).shape[:2]
@@ -362,3 +365,56 @@ def test_plot_all_without_queries_draws_whole_run_uncertainty(tmp_path: Path) ->
     assert fig is not None and "whole run" in fig.get_suptitle()
     drawn = [name for name, make in plots.FIGURES.items() if make(run) is not None]
     assert drawn == ["fig3_uncertainty", "fig4_5_returns"]
+
+
+def test_upside_down_late_from_period_metric(tmp_path: Path) -> None:
+    """10 periods: the last 30% are the last 3. Run r has upside_down[r, p] = p / 10 + r / 100, so
+    its late mean is (0.7 + 0.8 + 0.9) / 3 + r / 100 = 0.8 + r / 100."""
+    path = write_run_dir(
+        tmp_path / "g",
+        NONE_AND_BERNOULLI,
+        {"strategy": ["none", "bernoulli"]},
+        periods=10,
+        total_periods=10,
+    )
+    m = dict(np.load(path / "metrics.npz"))
+    n = m["eval_return"].shape[0]
+    m["upside_down"] = np.arange(10)[None, :] / 10 + np.arange(n)[:, None] / 100
+    np.savez(path / "metrics.npz", **m)
+    late, source = results.upside_down_late(results.load_run(path))
+    assert source == "periods"
+    np.testing.assert_allclose(late, 0.8 + np.arange(n) / 100)
+    rows = results.summarize(path)
+    np.testing.assert_allclose(rows[1]["upside_down_late_mean"], 0.8 + 0.04)  # runs 3, 4, 5
+    assert plots.fig_gait(results.load_run(path)) is None  # toy env: no gait figure
+    cfg = json.loads((path / "config.json").read_text())
+    cfg["config"]["env_name"] = "halfcheetah"
+    (path / "config.json").write_text(json.dumps(cfg))
+    assert (path / "figures" / "gait.png") in plots.plot_all(path)
+    assert "upside down (last 30%)" in (results.write_summary(path)[1]).read_text()
+
+
+def test_upside_down_late_from_visited_sample_for_old_halfcheetah_runs(tmp_path: Path) -> None:
+    """Without the per-period metric, a HalfCheetah run is judged on its saved sample of visited
+    states seen in the last 30% of the env steps; a toy run has no gait (n/a)."""
+    path = write_run_dir(tmp_path / "h", NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]})
+    late, source = results.upside_down_late(results.load_run(path))
+    assert source == "n/a" and np.all(np.isnan(late))  # toy env
+    cfg = json.loads((path / "config.json").read_text())
+    cfg["config"]["env_name"] = "halfcheetah"
+    (path / "config.json").write_text(json.dumps(cfg))
+    m = dict(np.load(path / "metrics.npz"))
+    n, k = m["visited_valid"].shape
+    last = int(m["env_steps"][0, -1])  # 4000: late states are those seen after step 2800
+    obs = np.zeros((n, k, 17))
+    steps = np.tile(np.linspace(0, last, k).astype(np.int64), (n, 1))
+    late_mask = steps > 0.7 * last
+    obs[:, :, 1] = np.where(late_mask & (np.arange(k) % 2 == 0), np.pi, 0.0)  # half flipped
+    obs[0, :, 1] = np.where(late_mask[0], np.pi, 0.0)  # run 0: every late state flipped
+    m.update(visited_obs=obs, visited_env_step=steps, visited_valid=np.ones((n, k), bool))
+    np.savez(path / "metrics.npz", **m)
+    late, source = results.upside_down_late(results.load_run(path))
+    assert source == "sample"
+    expected = [np.mean(np.arange(k)[late_mask[r]] % 2 == 0) for r in range(n)]
+    expected[0] = 1.0
+    np.testing.assert_allclose(late, expected)

@@ -111,6 +111,14 @@ def test_invalid_value_in_a_list_names_the_field():
         _sweep(budget="lots")
 
 
+@pytest.mark.parametrize(
+    ("option", "text"), [("seeds", "a,b"), ("seeds", "0,-1"), ("num_seeds", "three")]
+)
+def test_bad_seeds_are_a_clear_error_not_a_traceback(option, text):
+    with pytest.raises(SystemExit, match=rf"--{option} got .*expected integers >= 0"):
+        run.parse_args(["seed_sweep", "--preset", "tiny", f"--{option}", text])
+
+
 def test_unknown_option_lists_close_matches(capsys):
     with pytest.raises(SystemExit):
         run.parse_args(["seed_sweep", "--t_qury", "0.1"])
@@ -193,6 +201,8 @@ def test_state_layout_is_the_same_in_every_process():
     assert run.state_layout(a) == run.state_layout(b)
     c = {"env": _Node(np.zeros((2, 3, 5)), _Static())}
     assert run.state_layout(c) != run.state_layout(a)
+    renamed = {"envs": _Node(np.zeros((2, 3, 4)), _Static())}  # same shapes, another leaf path
+    assert run.state_layout(renamed) != run.state_layout(a)
 
 
 def test_other_config_in_same_directory_is_refused(uninterrupted):
@@ -291,7 +301,7 @@ def test_export_expert_from_a_run_acts_like_its_best_actor(uninterrupted, tmp_pa
     assert meta["train_env_steps"] == sweep.cfg.total_env_steps
     env = make_env(sweep.cfg)
     expert = load_expert(tmp_path / "expert", env.obs_dim, env.action_dim)
-    ret = evaluate_policy(
+    ret, _ = evaluate_policy(
         env,
         lambda obs: expert.act(expert.params, obs, jax.random.key(0)),
         jax.random.key(11),

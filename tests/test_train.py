@@ -12,10 +12,10 @@ import pytest
 from arld_jax import query
 from arld_jax.config import hparams_from_config, tiny
 from arld_jax.envs import toy_target_action
-from arld_jax.expert import Expert
+from arld_jax.expert import toy_expert
 from arld_jax.train import compiler_options, make_train, only_if
 
-TOY_EXPERT = Expert(params={}, act=lambda p, obs, k: toy_target_action(obs), meta={"name": "toy"})
+TOY_EXPERT = toy_expert()
 SEEDS = (0, 1, 2)
 TOL = 1e-3  # vmapped-vs-single tolerance, see test_vmapped_seed_equals_single_run
 
@@ -44,8 +44,8 @@ def test_eval_return_improves_over_untrained_start(toy_sweep):
         jnp.stack([jax.random.key(configs[i].seed) for i in plain]),
         _stack([hparams_from_config(configs[i]) for i in plain]),
     )
-    start = jax.vmap(trainer.evaluate)(
-        untrained.agent.actor_params, jax.random.split(jax.random.key(9), len(plain))
+    start, _ = jax.vmap(trainer.evaluate)(
+        untrained.agent, jax.random.split(jax.random.key(9), len(plain))
     )
     final = np.asarray(metrics.eval_return)[plain, -1]
     # Toy env: best policy earns 1 per step (50 per episode), a random-ish start well below.

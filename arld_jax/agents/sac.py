@@ -1,13 +1,12 @@
-"""SAC / Noisy SAC agent: state, one jitted-friendly update step, acting and the uncertainty measures.
+"""SAC (Haarnoja et al. 2018a/b) and Noisy SAC (paper 3.1) under the agent interface (`base.Agent`).
 
-The agent is a bundle of pure functions made by `make_agent(cfg, obs_dim, action_dim)`. Whether it is
-plain SAC or Noisy SAC is the sweepable `hp.noisy` (0 or 1), used as the noise scale of the mean head.
+Plain SAC or Noisy SAC is the sweepable `hp.noisy` (0 or 1), used as the noise scale of the actor's
+mean head, so one compiled program vmaps over both. Uncertainty (paper 3.1-3.2): intrinsic
+u(s) = sigma_theta(s), the policy's standard deviation; extrinsic (Noisy SAC) u(s) = Var[mu~(s)], the
+analytic variance of the perturbed mean.
 """
 
 from __future__ import annotations
-
-from collections.abc import Callable
-from typing import NamedTuple
 
 import chex
 import flax.struct
@@ -16,14 +15,24 @@ import jax.numpy as jnp
 import optax
 
 from arld_jax import losses
+from arld_jax.agents.base import (
+    ADAM,
+    Acting,
+    Agent,
+    UpdateMetrics,
+    adam_step,
+    polyak,
+    reduce_over_actions,
+    same_episode,
+)
 from arld_jax.config import Config, HParams
 from arld_jax.networks import Actor, PolicyOutput, TwinCritic, deterministic_action, sample_action
 from arld_jax.types import Params, PRNGKey, Transition
 
 
 @flax.struct.dataclass
-class AgentState:
-    """Parameters and optimizer states of one SAC agent."""
+class SACState:
+    """Parameters and optimizer states of one SAC agent (the loop's `TrainState.agent`)."""
 
     actor_params: Params
     critic_params: Params
@@ -34,53 +43,7 @@ class AgentState:
     alpha_opt: optax.OptState
 
 
-@flax.struct.dataclass
-class UpdateMetrics:
-    critic_loss: jax.Array
-    actor_loss: jax.Array
-    alpha: jax.Array
-    entropy: jax.Array  # -mean log pi(a|s) on the batch
-    td_abs: jax.Array  # mean |delta|
-
-
-class Agent(NamedTuple):
-    """Pure functions of a SAC agent."""
-
-    init: Callable[[PRNGKey, HParams], AgentState]
-    policy: Callable[[Params, jax.Array, PRNGKey, jax.Array], PolicyOutput]
-    update: Callable[
-        [AgentState, Transition, jax.Array, HParams, PRNGKey],
-        tuple[AgentState, jax.Array, UpdateMetrics],
-    ]
-    no_update: Callable[
-        [AgentState, Transition, jax.Array, HParams, PRNGKey],
-        tuple[AgentState, jax.Array, UpdateMetrics],
-    ]
-    actor: Actor
-    critic: TwinCritic
-    obs_dim: int
-    action_dim: int
-
-
-# Adam (Kingma & Ba 2015) as a direction; the sweepable learning rate multiplies it outside optax so
-# one compiled program serves any learning-rate grid.
-_ADAM = optax.scale_by_adam()
-
-
-def _adam_step(
-    params: Params, grads: Params, opt_state: optax.OptState, lr: jax.Array
-) -> tuple[Params, optax.OptState]:
-    direction, opt_state = _ADAM.update(grads, opt_state, params)
-    params = jax.tree.map(lambda p, d: p - lr * d, params, direction)
-    return params, opt_state
-
-
-def polyak(target: Params, online: Params, tau: jax.Array) -> Params:
-    """Target-network soft update theta' <- tau theta + (1 - tau) theta' (Lillicrap et al. 2015)."""
-    return jax.tree.map(lambda t, o: (1.0 - tau) * t + tau * o, target, online)
-
-
-def make_agent(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
+def make(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
     """Build the SAC agent for `cfg` (network sizes and dtype are static)."""
     dtype = jnp.bfloat16 if cfg.matmul_dtype == "bfloat16" else jnp.float32
     actor = Actor(
@@ -94,21 +57,21 @@ def make_agent(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
     critic = TwinCritic(hidden_sizes=cfg.hidden_sizes, dtype=dtype)
     target_entropy = -float(action_dim)  # Haarnoja et al. 2018b: -dim(A)
 
-    def init(key: PRNGKey, hp: HParams) -> AgentState:
+    def init(key: PRNGKey, hp: HParams) -> SACState:
         k_actor, k_critic, k_noise = jax.random.split(key, 3)
         obs = jnp.zeros((1, obs_dim))
         action = jnp.zeros((1, action_dim))
         actor_params = actor.init(k_actor, obs, k_noise, jnp.float32(0.0))
         critic_params = critic.init(k_critic, obs, action)
         log_alpha = jnp.log(hp.init_alpha).astype(jnp.float32)
-        return AgentState(
+        return SACState(
             actor_params=actor_params,
             critic_params=critic_params,
             target_critic_params=critic_params,
             log_alpha=log_alpha,
-            actor_opt=_ADAM.init(actor_params),
-            critic_opt=_ADAM.init(critic_params),
-            alpha_opt=_ADAM.init(log_alpha),
+            actor_opt=ADAM.init(actor_params),
+            critic_opt=ADAM.init(critic_params),
+            alpha_opt=ADAM.init(log_alpha),
         )
 
     def policy(
@@ -136,8 +99,13 @@ def make_agent(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
         return losses.actor_loss_from_values(log_prob, q, jnp.exp(log_alpha)), log_prob
 
     def update(
-        state: AgentState, batch: Transition, weights: jax.Array, hp: HParams, key: PRNGKey
-    ) -> tuple[AgentState, jax.Array, UpdateMetrics]:
+        state: SACState,
+        batch: Transition,
+        weights: jax.Array,
+        indices: jax.Array,
+        hp: HParams,
+        key: PRNGKey,
+    ) -> tuple[SACState, jax.Array, UpdateMetrics]:
         """One SAC gradient step: critics, then actor (against the new critics), then alpha, then
         Polyak targets. Returns the new state, the TD errors of the batch (for priorities) and metrics."""
         chex.assert_rank(batch.reward, 1)
@@ -146,22 +114,27 @@ def make_agent(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
         (c_loss, td), c_grads = jax.value_and_grad(critic_loss, has_aux=True)(
             state.critic_params, state, batch, weights, hp, k_critic
         )
-        critic_params, critic_opt = _adam_step(
+        critic_params, critic_opt = adam_step(
             state.critic_params, c_grads, state.critic_opt, hp.critic_lr
         )
         (a_loss, log_prob), a_grads = jax.value_and_grad(actor_loss, has_aux=True)(
             state.actor_params, critic_params, state.log_alpha, batch.obs, hp, k_actor
         )
-        actor_params, actor_opt = _adam_step(
+        actor_params, actor_opt = adam_step(
             state.actor_params, a_grads, state.actor_opt, hp.actor_lr
         )
-        log_alpha, alpha_opt = state.log_alpha, state.alpha_opt
-        if cfg.autotune_alpha:
-            alpha_grad = jax.grad(losses.alpha_loss_from_values)(
-                state.log_alpha, log_prob, target_entropy
-            )
-            log_alpha, alpha_opt = _adam_step(log_alpha, alpha_grad, alpha_opt, hp.alpha_lr)
-        new_state = AgentState(
+        # Temperature (Haarnoja et al. 2018b, eq. 18) when hp.autotune_alpha is 1, else fixed (paper
+        # A.1). Sweepable, so one program compares both: the step is computed and then selected.
+        alpha_grad = jax.grad(losses.alpha_loss_from_values)(
+            state.log_alpha, log_prob, target_entropy
+        )
+        tuned = adam_step(state.log_alpha, alpha_grad, state.alpha_opt, hp.alpha_lr)
+        log_alpha, alpha_opt = jax.tree.map(
+            lambda new, old: jnp.where(hp.autotune_alpha > 0.5, new, old),
+            tuned,
+            (state.log_alpha, state.alpha_opt),
+        )
+        new_state = SACState(
             actor_params=actor_params,
             critic_params=critic_params,
             target_critic_params=polyak(state.target_critic_params, critic_params, hp.tau),
@@ -180,8 +153,13 @@ def make_agent(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
         return new_state, td, metrics
 
     def no_update(
-        state: AgentState, batch: Transition, weights: jax.Array, hp: HParams, key: PRNGKey
-    ) -> tuple[AgentState, jax.Array, UpdateMetrics]:
+        state: SACState,
+        batch: Transition,
+        weights: jax.Array,
+        indices: jax.Array,
+        hp: HParams,
+        key: PRNGKey,
+    ) -> tuple[SACState, jax.Array, UpdateMetrics]:
         """Same signature as `update`, but only measures the TD errors (warm-up: no learning yet,
         replay priorities still follow the current critics)."""
         _, td = critic_loss(
@@ -190,21 +168,34 @@ def make_agent(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
         zero = jnp.zeros(())
         return state, td, UpdateMetrics(zero, zero, jnp.exp(state.log_alpha), zero, zero)
 
+    def act(state: SACState, obs: jax.Array, key: PRNGKey, hp: HParams) -> Acting:
+        """a = tanh(mu + sigma xi) (paper 3.2), u(s) per `cfg.uncertainty_reduce`."""
+        k_noise, k_sample = jax.random.split(key)
+        pol = policy(state.actor_params, obs, k_noise, hp.noisy)
+        action, _ = sample_action(pol, k_sample)
+        return Acting(
+            action=action,
+            uncertainty=uncertainty(pol, hp.noisy, cfg.uncertainty_reduce),
+            sigma=jnp.mean(jnp.exp(pol.log_std), axis=-1),
+        )
+
+    def act_deterministic(state: SACState, obs: jax.Array) -> jax.Array:
+        """tanh(mu(s)); Noisy SAC evaluates with the noise-free mean (mu_w, mu_b)."""
+        pol = policy(state.actor_params, obs, jax.random.key(0), jnp.float32(0.0))
+        return deterministic_action(pol)
+
     return Agent(
+        name="sac",
         init=init,
-        policy=policy,
+        act=act,
+        act_deterministic=act_deterministic,
+        begin_episode=same_episode,
         update=update,
         no_update=no_update,
-        actor=actor,
-        critic=critic,
+        policy_params=lambda state: state.actor_params,
         obs_dim=obs_dim,
         action_dim=action_dim,
     )
-
-
-def reduce_over_actions(x: jax.Array, how: str) -> jax.Array:
-    """One uncertainty number per state from a per-action-dimension value ([..., A] -> [...])."""
-    return {"mean": jnp.mean, "max": jnp.max, "sum": jnp.sum}[how](x, axis=-1)
 
 
 def uncertainty(policy: PolicyOutput, noisy: jax.Array, how: str = "mean") -> jax.Array:
@@ -217,19 +208,3 @@ def uncertainty(policy: PolicyOutput, noisy: jax.Array, how: str = "mean") -> ja
     intrinsic = reduce_over_actions(jnp.exp(policy.log_std), how)
     extrinsic = reduce_over_actions(policy.mean_var, how)
     return jnp.where(noisy > 0.5, extrinsic, intrinsic)
-
-
-def act(
-    agent: Agent, actor_params: Params, obs: jax.Array, key: PRNGKey, noise_scale: jax.Array
-) -> tuple[jax.Array, PolicyOutput]:
-    """Sample a training action for a batch of observations; also return the policy output."""
-    k_noise, k_sample = jax.random.split(key)
-    pol = agent.policy(actor_params, obs, k_noise, noise_scale)
-    action, _ = sample_action(pol, k_sample)
-    return action, pol
-
-
-def act_deterministic(agent: Agent, actor_params: Params, obs: jax.Array) -> jax.Array:
-    """Evaluation action tanh(mu(s)); Noisy SAC evaluates with the noise-free mean (mu_w, mu_b)."""
-    pol = agent.policy(actor_params, obs, jax.random.key(0), jnp.float32(0.0))
-    return deterministic_action(pol)
