@@ -440,3 +440,4 @@ def paper(**overrides: Any) -> Config:
 
 
 PRESETS = {"tiny": tiny, "halfcheetah": halfcheetah, "paper": paper}
+"""Base configs; the named sweeps of `arld_jax.sweep.SWEEP_PRESETS` start from these."""

@@ -7,12 +7,11 @@ for. Each ``fig*`` function takes the dict of `arld_jax.results.load_run` and re
 Figures are drawn on the Agg canvas directly (``Figure`` + ``FigureCanvasAgg``), never through
 pyplot: no global backend switch, no GUI, and nothing left open once a figure is saved.
 
-Command line: ``python -m arld_jax.plots RUN_DIR``.
+Command line: ``python -m arld_jax.run plot RUN_DIR`` (summary and figures, also of a group).
 """
 
 from __future__ import annotations
 
-import argparse
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -26,6 +25,8 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import EngFormatter
 
 from arld_jax.results import (
+    Cell,
+    RunDir,
     env_steps_axis,
     expert_return,
     group_cells,
@@ -49,8 +50,7 @@ _UNCERTAINTY_TITLE = {
 }
 _LINESTYLES = ("-", "--", ":", "-.")
 
-Run = dict[str, Any]
-Cell = dict[str, Any]
+Run = RunDir
 
 
 # -------------------------------------------------------------------------------------------------
@@ -68,10 +68,10 @@ def _new_figure(ncols: int = 1, nrows: int = 1, width: float = 6.4, height: floa
 
 def _partial_note(run: Run) -> str:
     """Suffix for titles of a partial run directory."""
-    if not run["partial"]:
+    if not run.partial:
         return ""
     steps = env_steps_axis(run)
-    total = run["config"].get("config", {}).get("total_env_steps")
+    total = run.cfg.get("total_env_steps")
     last = int(steps[-1]) if len(steps) else 0
     return f"\n[partial: {last:,} of {total:,} env steps]" if total else "\n[partial]"
 
@@ -85,7 +85,7 @@ def _steps_axis(ax: Axes) -> None:
 
 def _eval_every(run: Run) -> int:
     """Env steps per evaluation period (config, else the spacing of the evaluations)."""
-    value = run["config"].get("config", {}).get("eval_every")
+    value = run.cfg.get("eval_every")
     if value:
         return int(value)
     steps = env_steps_axis(run)
@@ -97,7 +97,7 @@ def trace_env_steps(run: Run) -> np.ndarray:
 
     Trace shape [R, P, T] is read from ``uncertainty_trace``.
     """
-    periods, per_eval = run["metrics"]["uncertainty_trace"].shape[1:3]
+    periods, per_eval = run.metrics["uncertainty_trace"].shape[1:3]
     p = np.arange(periods)[:, None]
     j = np.arange(per_eval)[None, :]
     return ((p + (j + 1) / per_eval) * _eval_every(run)).ravel()
@@ -105,7 +105,7 @@ def trace_env_steps(run: Run) -> np.ndarray:
 
 def _field(run: Run, cell: Cell, name: str, default: Any = None) -> Any:
     """A field of a cell (its first run; runs of a cell differ only in seed)."""
-    return run_field(run, cell["runs"][0], name, default)
+    return run_field(run, cell.runs[0], name, default)
 
 
 def _queries(run: Run, cell: Cell) -> bool:
@@ -122,7 +122,7 @@ def cell_name(run: Run, cell: Cell, exclude: Sequence[str] = ()) -> str:
     strategy = _field(run, cell, "strategy")
     uncertainty = _field(run, cell, "uncertainty")
     if strategy is None:
-        return cell["cell_label"] or f"cell {cell['cell']}"
+        return cell.cell_label or f"cell {cell.cell}"
     agent = "NoisySAC" if uncertainty == "extrinsic" else "SAC"
     parts = [_PREFIX.get(strategy, f"{strategy}-") + agent]
     if strategy == "bernoulli" and "query_prob" not in exclude:
@@ -135,7 +135,7 @@ def cell_name(run: Run, cell: Cell, exclude: Sequence[str] = ()) -> str:
             value = _field(run, cell, name)
             text = f"{value:g}" if isinstance(value, float) else str(value)
             parts.append(f"{_SHORT.get(name, name)}={text}")
-    return " ".join(parts) or cell["cell_label"]
+    return " ".join(parts) or cell.cell_label
 
 
 def _colors(n: int) -> list[Any]:
@@ -149,7 +149,7 @@ def _colors(n: int) -> list[Any]:
 
 def _cell_colors(cells: list[Cell]) -> dict[Any, Any]:
     """One colour per cell of the run, the same in every figure."""
-    return dict(zip([c["cell"] for c in cells], _colors(len(cells)), strict=True))
+    return dict(zip([c.cell for c in cells], _colors(len(cells)), strict=True))
 
 
 def _by_uncertainty(run: Run, cells: list[Cell]) -> list[tuple[str | None, list[Cell]]]:
@@ -191,7 +191,7 @@ def uncertainty_before_depletion(run: Run, index: int) -> tuple[np.ndarray, np.n
     reach the run's budget (that slice still had queries in it); the whole run when the budget is
     never reached or the run does not query.
     """
-    metrics = run["metrics"]
+    metrics = run.metrics
     x = trace_env_steps(run)
     u = np.asarray(metrics["uncertainty_trace"][index], dtype=np.float64).ravel()
     if run_field(run, index, "strategy", "none") == "none" or "demos_trace" not in metrics:
@@ -213,8 +213,8 @@ def _min_max(u: np.ndarray) -> np.ndarray:
 
 def _seed_run(run: Run, cell: Cell) -> int:
     """The run of the cell with seed 0 (else its smallest seed)."""
-    seeds = [s if s is not None else math.inf for s in cell["seeds"]]
-    return cell["runs"][int(np.argmin(seeds))]
+    seeds = [s if s is not None else math.inf for s in cell.seeds]
+    return cell.runs[int(np.argmin(seeds))]
 
 
 # -------------------------------------------------------------------------------------------------
@@ -231,7 +231,7 @@ def fig3_uncertainty(run: Run) -> Figure | None:
     have not yet depleted their budget. One line per querying cell, one panel per uncertainty
     measure when both are present. Without querying cells it shows every cell's whole run.
     """
-    metrics = run["metrics"]
+    metrics = run.metrics
     if "uncertainty_trace" not in metrics or metrics["uncertainty_trace"].shape[1] == 0:
         return None
     cells = group_cells(run)
@@ -245,8 +245,8 @@ def fig3_uncertainty(run: Run) -> Figure | None:
     drawn = 0
     for ax, (uncertainty, group) in zip(axes, groups, strict=True):
         for cell in group:
-            series = np.full((len(cell["runs"]), x_all.size), np.nan)
-            for row, index in enumerate(cell["runs"]):
+            series = np.full((len(cell.runs), x_all.size), np.nan)
+            for row, index in enumerate(cell.runs):
                 x, u = (
                     (x_all, np.asarray(metrics["uncertainty_trace"][index], float).ravel())
                     if whole_run
@@ -255,12 +255,12 @@ def fig3_uncertainty(run: Run) -> Figure | None:
                 smooth = moving_average(_min_max(u), SMOOTH_WINDOW)
                 series[row, : x.size] = smooth
             count = np.isfinite(series).sum(axis=0)
-            enough = count >= max(1, math.ceil(len(cell["runs"]) / 2))
+            enough = count >= max(1, math.ceil(len(cell.runs) / 2))
             if not enough.any():
                 continue
             mean = np.nansum(series, axis=0) / np.maximum(count, 1)
             mean = np.where(enough, mean, np.nan)
-            ax.plot(x_all, mean, color=colors[cell["cell"]], lw=1.5, label=cell_name(run, cell))
+            ax.plot(x_all, mean, color=colors[cell.cell], lw=1.5, label=cell_name(run, cell))
             drawn += 1
         ax.set_ylabel(f"normalised uncertainty (moving avg, {SMOOTH_WINDOW} points)")
         ax.set_title(_UNCERTAINTY_TITLE.get(uncertainty, "Uncertainty u(s)"), fontsize=10)
@@ -279,8 +279,8 @@ def fig4_5_returns(run: Run) -> Figure | None:
     Two panels when both uncertainty measures are present: intrinsic (SAC, Fig. 4) and extrinsic
     (Noisy SAC, Fig. 5). The expert's return is the black line when known.
     """
-    metrics = run["metrics"]
-    if run["periods"] == 0:
+    metrics = run.metrics
+    if run.periods == 0:
         return None
     cells = group_cells(run)
     colors = _cell_colors(cells)
@@ -291,8 +291,8 @@ def fig4_5_returns(run: Run) -> Figure | None:
     marker = "o" if len(steps) <= 3 else None
     for ax, (uncertainty, group) in zip(axes, groups, strict=True):
         for cell in group:
-            mean, half = mean_ci95_columns(metrics["eval_return"][cell["runs"]])
-            color = colors[cell["cell"]]
+            mean, half = mean_ci95_columns(metrics["eval_return"][cell.runs])
+            color = colors[cell.cell]
             ax.plot(steps, mean, color=color, lw=1.5, marker=marker, label=cell_name(run, cell))
             band = np.isfinite(half)
             if band.any():
@@ -314,9 +314,9 @@ def fig4_5_returns(run: Run) -> Figure | None:
 
 def _fig_parameter(run: Run, strategy: str, param: str, label: str, number: int) -> Figure | None:
     """Figs. 6 and 7: a query-strategy parameter's effect (learning curves and final return)."""
-    metrics = run["metrics"]
+    metrics = run.metrics
     cells = [c for c in group_cells(run) if _field(run, c, "strategy") == strategy]
-    if not cells or run["periods"] == 0:
+    if not cells or run.periods == 0:
         return None
     # Lines: cells that differ in anything swept but the strategy's parameter. t_query is irrelevant
     # to bernoulli and query_prob to active, so a full grid's duplicates collapse to their first
@@ -345,7 +345,7 @@ def _fig_parameter(run: Run, strategy: str, param: str, label: str, number: int)
         xs, means, halves = [], [], []
         for value in sorted(line):
             cell = line[value]
-            mean, _ = mean_ci95_columns(metrics["eval_return"][cell["runs"]])
+            mean, _ = mean_ci95_columns(metrics["eval_return"][cell.runs])
             suffix = f" ({name})" if len(lines) > 1 else ""
             curves.plot(
                 steps,
@@ -355,7 +355,7 @@ def _fig_parameter(run: Run, strategy: str, param: str, label: str, number: int)
                 lw=1.4,
                 label=f"{_SHORT.get(param, param)}={value:g}{suffix}",
             )
-            final_mean, final_half = mean_ci95(metrics["eval_return"][cell["runs"], -1])
+            final_mean, final_half = mean_ci95(metrics["eval_return"][cell.runs, -1])
             xs.append(value)
             means.append(final_mean)
             halves.append(final_half if math.isfinite(final_half) else 0.0)
@@ -417,14 +417,14 @@ def fig8_states(run: Run, max_panels: int = 4) -> Figure | None:
     seed-0 run of one querying cell. Up to ``max_panels`` cells, taken in turn from the active,
     bernoulli and greedy cells (the paper shows AQSAC and BQSAC).
     """
-    metrics = run["metrics"]
+    metrics = run.metrics
     needed = ("visited_obs", "visited_valid", "queried_obs", "queried_valid")
     if any(k not in metrics for k in needed):
         return None
     candidates: dict[str, list[Cell]] = {"active": [], "bernoulli": [], "greedy": []}
     for cell in group_cells(run):
         strategy = _field(run, cell, "strategy")
-        if strategy in candidates and np.any(metrics["queried_valid"][cell["runs"]]):
+        if strategy in candidates and np.any(metrics["queried_valid"][cell.runs]):
             candidates[strategy].append(cell)
     chosen: list[Cell] = []
     while len(chosen) < max_panels and any(candidates.values()):
@@ -438,7 +438,7 @@ def fig8_states(run: Run, max_panels: int = 4) -> Figure | None:
     for ax in axes[len(chosen) :]:
         ax.set_visible(False)
     for ax, cell in zip(axes, chosen, strict=False):
-        idx = cell["runs"]
+        idx = cell.runs
         pooled = metrics["visited_obs"][idx][metrics["visited_valid"][idx]].astype(np.float64)
         index = _seed_run(run, cell)
         visited = metrics["visited_obs"][index][metrics["visited_valid"][index]]
@@ -475,7 +475,7 @@ def fig8_states(run: Run, max_panels: int = 4) -> Figure | None:
 def fig9_budget(run: Run) -> Figure | None:
     """Fig. 9: cumulative demonstrations vs env steps per querying cell (mean over seeds), with the
     budget as a dashed line."""
-    metrics = run["metrics"]
+    metrics = run.metrics
     if "demos_trace" not in metrics or metrics["demos_trace"].shape[1] == 0:
         return None
     cells = group_cells(run)
@@ -487,12 +487,12 @@ def fig9_budget(run: Run) -> Figure | None:
     fig, (ax,) = _new_figure()
     budgets: dict[float, Any] = {}
     for cell in querying:
-        demos = np.asarray(metrics["demos_trace"][cell["runs"]], dtype=np.float64)
-        mean = np.nanmean(demos.reshape(len(cell["runs"]), -1), axis=0)
-        ax.plot(x, mean, color=colors[cell["cell"]], lw=1.5, label=cell_name(run, cell))
+        demos = np.asarray(metrics["demos_trace"][cell.runs], dtype=np.float64)
+        mean = np.nanmean(demos.reshape(len(cell.runs), -1), axis=0)
+        ax.plot(x, mean, color=colors[cell.cell], lw=1.5, label=cell_name(run, cell))
         budget = _field(run, cell, "budget")
         if budget is not None:
-            budgets.setdefault(float(budget), colors[cell["cell"]])
+            budgets.setdefault(float(budget), colors[cell.cell])
     for budget, color in budgets.items():
         ax.axhline(
             budget,
@@ -513,9 +513,9 @@ def fig_gait(run: Run) -> Figure | None:
     """The gait: % of visited training states (left) and of evaluation states (right) with the
     torso upside down, per period and cell, mean and 95% CI over seeds. A run that learned the
     flipped local optimum sits near 100% (`gait.upside_down`). HalfCheetah runs with the metric only."""
-    metrics = run["metrics"]
-    env_name = run["config"].get("config", {}).get("env_name")
-    if run["periods"] == 0 or "upside_down" not in metrics or env_name != "halfcheetah":
+    metrics = run.metrics
+    env_name = run.cfg.get("env_name")
+    if run.periods == 0 or "upside_down" not in metrics or env_name != "halfcheetah":
         return None
     cells = group_cells(run)
     colors = _cell_colors(cells)
@@ -525,8 +525,8 @@ def fig_gait(run: Run) -> Figure | None:
     fig, axes = _new_figure(ncols=len(panels))
     for ax, (name, title) in zip(axes, panels, strict=True):
         for cell in cells:
-            mean, half = mean_ci95_columns(100.0 * metrics[name][cell["runs"]])
-            color = colors[cell["cell"]]
+            mean, half = mean_ci95_columns(100.0 * metrics[name][cell.runs])
+            color = colors[cell.cell]
             ax.plot(steps, mean, color=color, lw=1.5, label=cell_name(run, cell))
             band = np.isfinite(half)
             if band.any():
@@ -561,7 +561,7 @@ def plot_all(run_dir: str | Path) -> list[Path]:
     skipped, not errors. Raises FileNotFoundError like `load_run` when the directory is incomplete.
     """
     run = load_run(run_dir)
-    out_dir = run["path"] / "figures"
+    out_dir = run.path / "figures"
     out_dir.mkdir(exist_ok=True)
     paths = []
     for name, make in FIGURES.items():
@@ -575,14 +575,38 @@ def plot_all(run_dir: str | Path) -> list[Path]:
     return paths
 
 
-def main(argv: list[str] | None = None) -> None:
-    """``python -m arld_jax.plots RUN_DIR``: write the figures and print their paths."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run_dir", type=Path)
-    args = parser.parse_args(argv)
-    for path in plot_all(args.run_dir):
-        print(path)
+def plot_group(group_dir: str | Path) -> Path:
+    """Fig. 1 shape: final evaluation return (mean and 95% CI over seeds) of every cell of every
+    member of a group, one panel per agent family. Writes group_dir/figures/fig1_agents.png."""
+    from arld_jax.results import summarize_group
 
-
-if __name__ == "__main__":
-    main()
+    group_dir = Path(group_dir)
+    rows = summarize_group(group_dir)
+    agents = list(dict.fromkeys(row["member"] for row in rows))
+    fig, axes = _new_figure(ncols=len(agents), width=4.2, height=4.6)
+    for ax, member in zip(axes, agents, strict=True):
+        mine = [row for row in rows if row["member"] == member]
+        colors = _colors(len(mine))
+        for i, row in enumerate(mine):
+            ax.errorbar(
+                i,
+                row["final_return_mean"],
+                yerr=row["final_return_ci95"] if math.isfinite(row["final_return_ci95"]) else None,
+                fmt="o",
+                color=colors[i],
+                capsize=4,
+            )
+        ax.set_xticks(range(len(mine)))
+        ax.set_xticklabels(
+            [row["cell_label"] or "base" for row in mine], rotation=40, ha="right", fontsize=7
+        )
+        ax.set_title(f"{mine[0]['agent']} ({member})", fontsize=10)
+        ax.set_ylabel("final evaluation return")
+        ax.grid(axis="y", alpha=0.3)
+    fig.suptitle("Final return per agent and cell, mean and 95% CI over seeds (cf. paper Fig. 1)")
+    out = group_dir / "figures"
+    out.mkdir(exist_ok=True)
+    path = out / "fig1_agents.png"
+    fig.savefig(path, dpi=DPI, bbox_inches="tight")
+    fig.clear()
+    return path

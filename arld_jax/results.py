@@ -15,14 +15,13 @@ A sweep that is still running leaves a *partial* directory whose metrics hold fe
 Statistics are over seeds within a cell: the mean and the half-width of the 95% confidence interval
 of the mean (Student's t with n - 1 degrees of freedom), see `mean_ci95`.
 
-Command line: ``python -m arld_jax.results RUN_DIR`` writes summary.csv and summary.md and prints
-the Markdown.
+Command line: ``python -m arld_jax.run plot RUN_DIR`` writes summary.csv, summary.md and the figures.
 """
 
 from __future__ import annotations
 
-import argparse
 import csv
+import dataclasses
 import json
 import math
 import warnings
@@ -138,15 +137,41 @@ def area_under_curve(eval_return: np.ndarray, env_steps: np.ndarray) -> np.ndarr
 # -------------------------------------------------------------------------------------------------
 
 
-def load_run(run_dir: str | Path) -> dict[str, Any]:
+@dataclasses.dataclass(frozen=True)
+class RunDir:
+    """A run directory as read by `load_run` (the one reader of what `arld_jax.run` writes)."""
+
+    path: Path
+    config: dict[str, Any]  # the whole config.json: config, sweep, seeds, preset, command, expert
+    runs: list[dict[str, Any]]  # runs.json, one dict per run present in metrics.npz
+    metrics: dict[str, np.ndarray]  # metrics.npz, arrays [runs, periods, ...]
+    timing: dict[str, Any]  # timing.json, or {} if absent (a sweep still running)
+    periods: int  # evaluation periods present
+    expected_periods: int  # total_env_steps // eval_every
+    partial: bool  # fewer periods or runs present than the sweep will write
+    missing_runs: int  # runs listed in runs.json but not yet in metrics.npz (normally 0)
+
+    @property
+    def cfg(self) -> dict[str, Any]:
+        """The run's Config fields (config.json's "config")."""
+        return self.config.get("config", {})
+
+
+@dataclasses.dataclass(frozen=True)
+class Cell:
+    """Runs of one cell: same swept values, different seeds."""
+
+    cell: Any  # the cell id of runs.json
+    cell_label: str
+    runs: list[int]  # run indices
+    seeds: list[Any]
+    fields: dict[str, Any]  # runs.json entry of its first run
+
+
+def load_run(run_dir: str | Path) -> RunDir:
     """Load a run directory.
 
-    Returns a dict with ``path`` (Path), ``config`` (the whole config.json: config, sweep, seeds,
-    preset, command, expert), ``runs`` (runs.json, one dict per run), ``metrics`` (dict of numpy
-    arrays from metrics.npz), ``timing`` (timing.json, or {} if absent), ``periods`` (evaluation
-    periods present), ``expected_periods`` (total_env_steps // eval_every), ``partial`` (fewer
-    periods present than expected) and ``missing_runs`` (runs listed in runs.json but not yet in
-    metrics.npz; normally 0).
+    Returns a `RunDir` (its fields say what each file holds).
 
     Raises:
         FileNotFoundError: the directory or one of config.json, runs.json, metrics.npz is missing.
@@ -188,94 +213,84 @@ def load_run(run_dir: str | Path) -> dict[str, Any]:
     eval_every = int(cfg.get("eval_every") or 0)
     total = int(cfg.get("total_env_steps") or 0)
     expected = total // eval_every if eval_every > 0 else periods
-    return {
-        "path": path,
-        "config": config,
-        "runs": runs,
-        "metrics": metrics,
-        "timing": timing,
-        "periods": int(periods),
-        "expected_periods": int(expected),
-        "partial": bool(periods < expected or missing_runs > 0),
-        "missing_runs": int(missing_runs),
-    }
+    return RunDir(
+        path=path,
+        config=config,
+        runs=runs,
+        metrics=metrics,
+        timing=timing,
+        periods=int(periods),
+        expected_periods=int(expected),
+        partial=bool(periods < expected or missing_runs > 0),
+        missing_runs=int(missing_runs),
+    )
 
 
-def _as_run(run: dict[str, Any] | str | Path) -> dict[str, Any]:
-    """Accept a loaded run dict or a directory."""
-    return run if isinstance(run, dict) else load_run(run)
+def _as_run(run: RunDir | str | Path) -> RunDir:
+    """Accept a loaded run directory or a path."""
+    return run if isinstance(run, RunDir) else load_run(run)
 
 
-def run_field(run: dict[str, Any], index: int, name: str, default: Any = None) -> Any:
+def run_field(run: RunDir, index: int, name: str, default: Any = None) -> Any:
     """Field ``name`` of run ``index``: from runs.json, else from the config, else ``default``."""
-    entry = run["runs"][index]
+    entry = run.runs[index]
     if name in entry:
         return entry[name]
-    return run["config"].get("config", {}).get(name, default)
+    return run.cfg.get(name, default)
 
 
-def swept_fields(run: dict[str, Any]) -> list[str]:
+def swept_fields(run: RunDir) -> list[str]:
     """The swept fields that tell cells apart (the config's sweep keys, without seed)."""
-    return [name for name in run["config"].get("sweep") or {} if name != "seed"]
+    return [name for name in run.config.get("sweep") or {} if name != "seed"]
 
 
-def env_steps_axis(run: dict[str, Any]) -> np.ndarray:
+def env_steps_axis(run: RunDir) -> np.ndarray:
     """[P] env steps of the evaluations present (metrics env_steps is [R, P] or [P])."""
-    metrics = run["metrics"]
+    metrics = run.metrics
     if "env_steps" in metrics:
         steps = np.asarray(metrics["env_steps"])
         return steps[0] if steps.ndim == 2 else steps
-    eval_every = int(run["config"].get("config", {}).get("eval_every", 1))
-    return (np.arange(run["periods"]) + 1) * eval_every
+    eval_every = int(run.cfg.get("eval_every", 1))
+    return (np.arange(run.periods) + 1) * eval_every
 
 
-def group_cells(run: dict[str, Any]) -> list[dict[str, Any]]:
-    """The cells of a run directory in cell order.
-
-    Each cell is ``{"cell": id, "cell_label": str, "runs": [run indices], "seeds": [...],
-    "fields": runs.json entry of its first run}``; runs of one cell differ only in seed.
-    """
-    cells: dict[Any, dict[str, Any]] = {}
-    for index, entry in enumerate(run["runs"]):
+def group_cells(run: RunDir) -> list[Cell]:
+    """The cells of a run directory in cell order; runs of one cell differ only in seed."""
+    cells: dict[Any, Cell] = {}
+    for index, entry in enumerate(run.runs):
         key = entry.get("cell", entry.get("cell_label", 0))
         if key not in cells:
-            cells[key] = {
-                "cell": key,
-                "cell_label": str(entry.get("cell_label", "")),
-                "runs": [],
-                "seeds": [],
-                "fields": dict(entry),
-            }
-        cells[key]["runs"].append(index)
-        cells[key]["seeds"].append(entry.get("seed", run_field(run, index, "seed")))
+            cells[key] = Cell(key, str(entry.get("cell_label", "")), [], [], dict(entry))
+        cells[key].runs.append(index)
+        cells[key].seeds.append(entry.get("seed", run_field(run, index, "seed")))
     out = list(cells.values())
-    if all(isinstance(c["cell"], int) for c in out):
-        out.sort(key=lambda c: c["cell"])
+    if all(isinstance(c.cell, int) for c in out):
+        out.sort(key=lambda c: c.cell)
     return out
 
 
-def expert_return(run: dict[str, Any]) -> float:
+def expert_return(run: RunDir) -> float:
     """The expert's evaluation return from config.json, or nan when there is no expert."""
-    expert = run["config"].get("expert") or {}
+    expert = run.config.get("expert") or {}
     value = expert.get("eval_return") if isinstance(expert, dict) else None
     return float(value) if value is not None else math.nan
 
 
-def upside_down_late(run: dict[str, Any]) -> tuple[np.ndarray, str]:
+def upside_down_late(run: RunDir) -> tuple[np.ndarray, str]:
     """[R] fraction of visited training states upside down in the last 30% of the periods present
     (`gait.LATE_FRACTION`), and where it came from: "periods" (the per-period metric
     `upside_down`), "sample" (runs recorded before that metric existed: the saved uniform sample
     of visited states, those seen in the last 30% of the env steps present) or "n/a" (no data, or
     not HalfCheetah)."""
-    metrics = run["metrics"]
-    num_runs, periods = run["metrics"]["eval_return"].shape[:2]
+    metrics = run.metrics
+    num_runs, periods = run.metrics["eval_return"].shape[:2]
     nan = np.full(num_runs, np.nan)
     if periods == 0:
         return nan, "n/a"
     if "upside_down" in metrics:
         late = max(1, math.ceil(gait.LATE_FRACTION * periods))
         return np.mean(np.asarray(metrics["upside_down"], np.float64)[:, -late:], axis=1), "periods"
-    env_name = run["config"].get("config", {}).get("env_name")
+    env_name = run.cfg.get("env_name")
     if env_name != "halfcheetah" or "visited_obs" not in metrics:
         return nan, "n/a"
     last = env_steps_axis(run)[-1]
@@ -293,7 +308,7 @@ def upside_down_late(run: dict[str, Any]) -> tuple[np.ndarray, str]:
 # -------------------------------------------------------------------------------------------------
 
 
-def summarize(run_dir: str | Path | dict[str, Any]) -> list[dict[str, Any]]:
+def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
     """One row per cell, in cell order, over the evaluation periods present.
 
     Row keys: ``cell``, ``cell_label``, the swept fields' values, then `STAT_COLUMNS`:
@@ -304,29 +319,29 @@ def summarize(run_dir: str | Path | dict[str, Any]) -> list[dict[str, Any]]:
     Means and 95% CIs are over the seeds of the cell (`mean_ci95`).
     """
     run = _as_run(run_dir)
-    metrics = run["metrics"]
+    metrics = run.metrics
     steps = env_steps_axis(run)
     eval_return = np.asarray(metrics["eval_return"], dtype=np.float64)
     auc = area_under_curve(eval_return, steps)
     demos = metrics.get("demos_used")
     flipped, flipped_source = upside_down_late(run)
     expert = expert_return(run)
-    sps = float(run["timing"].get("env_steps_per_second", math.nan))
-    periods = run["periods"]
+    sps = float(run.timing.get("env_steps_per_second", math.nan))
+    periods = run.periods
     fields = swept_fields(run)
 
     rows = []
     for cell in group_cells(run):
-        idx = np.asarray(cell["runs"])
+        idx = np.asarray(cell.runs)
         final = eval_return[idx, -1] if periods else np.full(idx.size, np.nan)
         final_demos = (
             np.asarray(demos, dtype=np.float64)[idx, -1]
             if demos is not None and periods
             else np.full(idx.size, np.nan)
         )
-        row: dict[str, Any] = {"cell": cell["cell"], "cell_label": cell["cell_label"]}
+        row: dict[str, Any] = {"cell": cell.cell, "cell_label": cell.cell_label}
         for name in fields:
-            row[name] = run_field(run, cell["runs"][0], name)
+            row[name] = run_field(run, cell.runs[0], name)
         row["n_seeds"] = int(idx.size)
         row["final_return_mean"], row["final_return_ci95"] = mean_ci95(final)
         row["auc_mean"], row["auc_ci95"] = mean_ci95(auc[idx])
@@ -375,23 +390,23 @@ def _format_field(value: Any) -> str:
     return str(value)
 
 
-def _markdown(run: dict[str, Any], rows: list[dict[str, Any]]) -> str:
+def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
     """The Markdown summary: a header stating what the numbers are, then one table row per cell."""
-    config = run["config"]
+    config = run.config
     cfg = config.get("config", {})
     total = int(cfg.get("total_env_steps") or 0)
     last = rows[0]["env_steps"] if rows else 0
     seeds = config.get("seeds", [])
     seed_counts = sorted({row["n_seeds"] for row in rows})
     per_cell = "/".join(str(n) for n in seed_counts)
-    lines = [f"# Sweep summary: {run['path'].name}", ""]
-    if run["partial"]:
+    lines = [f"# Sweep summary: {run.path.name}", ""]
+    if run.partial:
         note = (
-            f"**Partial run directory**: {run['periods']} of {run['expected_periods']} evaluation "
+            f"**Partial run directory**: {run.periods} of {run.expected_periods} evaluation "
             f"periods present ({last:,} of {total:,} env steps per run)"
         )
-        if run["missing_runs"]:
-            note += f", {run['missing_runs']} runs not in metrics.npz yet"
+        if run.missing_runs:
+            note += f", {run.missing_runs} runs not in metrics.npz yet"
         lines += [
             note + "; the sweep is probably still running and every number below is over "
             "the periods present.",
@@ -406,7 +421,7 @@ def _markdown(run: dict[str, Any], rows: list[dict[str, Any]]) -> str:
     expert = expert_return(run)
     if math.isfinite(expert):
         header.append(f"expert return: {expert:.1f}")
-    sps = run["timing"].get("env_steps_per_second")
+    sps = run.timing.get("env_steps_per_second")
     if sps is not None:
         header.append(f"throughput: {float(sps):,.0f} env steps/s (all runs together)")
     lines += [" · ".join(header) + ".", ""]
@@ -462,25 +477,73 @@ def write_summary(run_dir: str | Path) -> tuple[Path, Path]:
     run = load_run(run_dir)
     rows = summarize(run)
     columns = ["cell", "cell_label", *swept_fields(run), *STAT_COLUMNS]
-    csv_path = run["path"] / "summary.csv"
+    csv_path = run.path / "summary.csv"
     with csv_path.open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=columns)
         writer.writeheader()
         writer.writerows(rows)
-    md_path = run["path"] / "summary.md"
+    md_path = run.path / "summary.md"
     md_path.write_text(_markdown(run, rows))
     return csv_path, md_path
 
 
-def main(argv: list[str] | None = None) -> None:
-    """``python -m arld_jax.results RUN_DIR``: write the summary files and print the Markdown."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("run_dir", type=Path)
-    args = parser.parse_args(argv)
-    csv_path, md_path = write_summary(args.run_dir)
-    print(md_path.read_text())
-    print(f"wrote {csv_path} and {md_path}")
+GROUP_COLUMNS: tuple[str, ...] = ("member", "agent", "cell", "cell_label", *STAT_COLUMNS)
+"""Columns of a group summary row (`write_group_summary`)."""
 
 
-if __name__ == "__main__":
-    main()
+def group_members(group_dir: str | Path) -> list[Path]:
+    """The member run directories of a `SweepGroup` output directory (its group.json), in order."""
+    group_dir = Path(group_dir)
+    path = group_dir / "group.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"{group_dir} is not a group of runs (no group.json)")
+    return [group_dir / name for name in json.loads(path.read_text())["members"]]
+
+
+def summarize_group(group_dir: str | Path) -> list[dict[str, Any]]:
+    """`summarize` of every member, each row with its member name and agent family in front."""
+    rows = []
+    for member in group_members(group_dir):
+        run = load_run(member)
+        agent = run.cfg.get("agent", "sac")
+        rows += [{"member": member.name, "agent": agent, **row} for row in summarize(run)]
+    return rows
+
+
+def write_group_summary(group_dir: str | Path) -> tuple[Path, Path]:
+    """summary.csv and summary.md of a group: one table, a row per (member, cell)."""
+    group_dir = Path(group_dir)
+    rows = summarize_group(group_dir)
+    csv_path = group_dir / "summary.csv"
+    with csv_path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=GROUP_COLUMNS, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows)
+    command = json.loads((group_dir / "group.json").read_text()).get("command", "")
+    steps = sorted({row["env_steps"] for row in rows})
+    lines = [
+        f"# Group summary: {group_dir.name}",
+        "",
+        f"One compiled program per agent family; env steps per run at the last evaluation: "
+        f"{', '.join(f'{s:,}' for s in steps)}. Mean ± half-width of the 95% CI over seeds "
+        "(Student's t). Per-member details are in each member's own summary.md.",
+        "",
+    ]
+    if command:
+        lines += [f"Command: `{command}`", ""]
+    lines += [
+        "| agent | cell | seeds | final return | AUC (mean return) | demos used |"
+        " upside down (last 30%) |",
+        "|---|---|---:|---:|---:|---:|---:|",
+    ]
+    for row in rows:
+        lines.append(
+            f"| {row['agent']} | {row['cell_label'] or '-'} | {row['n_seeds']} | "
+            f"{format_mean_ci(row['final_return_mean'], row['final_return_ci95'])} | "
+            f"{format_mean_ci(row['auc_mean'], row['auc_ci95'])} | "
+            f"{format_mean_ci(row['demos_used_mean'], row['demos_used_ci95'])} | "
+            f"{_format_percent(row['upside_down_late_mean'], row['upside_down_late_ci95'])} |"
+        )
+    md_path = group_dir / "summary.md"
+    md_path.write_text("\n".join(lines) + "\n")
+    return csv_path, md_path

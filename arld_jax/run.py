@@ -29,7 +29,14 @@ import numpy as np
 
 from arld_jax import config as config_mod
 from arld_jax.config import SWEEPABLE, Config
-from arld_jax.sweep import REPO_ROOT, SHIPPED_EXPERT, SWEEP_PRESETS, Sweep, resolve_expert_path
+from arld_jax.sweep import (
+    REPO_ROOT,
+    SHIPPED_EXPERT,
+    SWEEP_PRESETS,
+    Sweep,
+    SweepGroup,
+    resolve_expert_path,
+)
 
 CHECKPOINT_DIR = "checkpoints"
 METRICS_FILE = "metrics.npz"
@@ -96,11 +103,18 @@ def _non_negative_int(option: str, text: str) -> int:
     return value
 
 
-def apply_overrides(base: Sweep, overrides: dict[str, str], full_grid: bool = False) -> Sweep:
+def apply_overrides(
+    base: Sweep, overrides: dict[str, str], full_grid: bool = False
+) -> Sweep | SweepGroup:
     """Apply --FIELD VALUE overrides: a comma list on a sweepable field sweeps it. `full_grid`
-    keeps cells that differ only in fields their strategy ignores (see `sweep.RELEVANT_FOR`)."""
+    keeps cells that differ only in fields their strategy ignores (see `sweep.RELEVANT_FOR`).
+    A list of agent families (`--agent sac,td3`) gives a `SweepGroup`: one program per agent."""
     fields, sweep, seeds = {}, dict(base.sweep), base.seeds
+    agents: tuple[str, ...] = ()
     for name, text in overrides.items():
+        if name == "agent" and "," in text:
+            agents = tuple(dict.fromkeys(parse_value(name, p) for p in text.split(",") if p))
+            continue
         if name == "seeds":
             seeds = tuple(_non_negative_int("seeds", s) for s in text.split(",") if s.strip())
             continue
@@ -120,12 +134,17 @@ def apply_overrides(base: Sweep, overrides: dict[str, str], full_grid: bool = Fa
             sweep.pop(name, None)
             fields[name] = values[0]
     try:
-        return Sweep(
+        out = Sweep(
             cfg=base.cfg.replace(**fields),
             sweep=sweep,
             seeds=seeds,
             prune=base.prune and not full_grid,
         )
+        if len(agents) > 1:
+            return SweepGroup.per_agent(out, agents)
+        if agents:
+            return dataclasses.replace(out, cfg=out.cfg.replace(agent=agents[0]))
+        return out
     except ValueError as err:
         raise SystemExit(f"error: {err}") from None
 
@@ -201,7 +220,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def parse_args(argv: list[str]) -> tuple[argparse.Namespace, Sweep | None]:
+def parse_args(argv: list[str]) -> tuple[argparse.Namespace, Sweep | SweepGroup | None]:
     """Parse the command line; unknown options fail with close matches."""
     parser = build_parser()
     args, unknown = parser.parse_known_args(argv)
@@ -310,7 +329,7 @@ def run_sweep(
     import orbax.checkpoint as ocp
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-    from arld_jax.train import compiler_options, make_train
+    from arld_jax.train import jit_chunk, make_train
 
     cfg = sweep.cfg
     expert = None
@@ -340,12 +359,7 @@ def run_sweep(
     chunk = _choose_chunk(cfg.num_evals, chunk_periods)
     num_chunks = cfg.num_evals // chunk
     init = jax.jit(jax.vmap(trainer.init), out_shardings=sharding)
-    run_chunk = jax.jit(
-        jax.vmap(trainer.run_periods, in_axes=(0, 0, None, None)),
-        static_argnums=3,
-        donate_argnums=0,
-        compiler_options=compiler_options(),
-    )
+    run_chunk = jit_chunk(trainer)
 
     mngr = ocp.CheckpointManager(
         (out / CHECKPOINT_DIR).absolute(),
@@ -451,6 +465,11 @@ def _is_key(x: Any) -> bool:
     return hasattr(x, "dtype") and jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key)
 
 
+def checkpoint_key(index: int) -> str:
+    """The orbax key of the state's leaf number `index` (leaves in `jax.tree.leaves` order)."""
+    return f"{index:05d}"
+
+
 def to_checkpoint(state: Any) -> dict[str, Any]:
     """The state's leaves as a flat {index: array} dict for orbax: typed PRNG keys become their raw
     uint32 data, and zero-size leaves (orbax refuses them; e.g. MJX's empty actuator arrays) are
@@ -459,7 +478,7 @@ def to_checkpoint(state: Any) -> dict[str, Any]:
 
     leaves = jax.tree.leaves(state)
     return {
-        f"{i:05d}": jax.random.key_data(x) if _is_key(x) else x
+        checkpoint_key(i): jax.random.key_data(x) if _is_key(x) else x
         for i, x in enumerate(leaves)
         if x.size > 0
     }
@@ -509,7 +528,7 @@ def from_checkpoint(saved: dict[str, Any], template: Any) -> Any:
         if x.size == 0:
             out.append(x)
         else:
-            data = saved[f"{i:05d}"]
+            data = saved[checkpoint_key(i)]
             out.append(jax.random.wrap_key_data(data) if _is_key(x) else data)
     return jax.tree.unflatten(treedef, out)
 
@@ -584,7 +603,7 @@ def export_expert(run_dir: Path, out: Path) -> Path:
     for i, (path, _) in enumerate(flat):
         keys = jax.tree_util.keystr(path)
         if keys.startswith(".agent.actor_params"):
-            actor_leaves[i] = np.asarray(restored[f"{i:05d}"])
+            actor_leaves[i] = np.asarray(restored[checkpoint_key(i)])
     metrics = np.load(run_dir / METRICS_FILE)
     periods = metrics["eval_return"].shape[1]
     latest = metrics["eval_return"][:, periods - 1]
@@ -632,16 +651,68 @@ def main(argv: list[str] | None = None) -> None:
         return
     if args.command == "plot":
         run_dir = Path(args.run_dir)
+        if (run_dir / GROUP_FILE).exists():
+            _write_group_results(run_dir, True, print)
+            return
         if not (run_dir / "config.json").exists():
             raise SystemExit(f"error: {run_dir} is not a run directory (no config.json)")
         _write_results(run_dir, True, print)
         return
     _enable_compilation_cache()
     if args.command == "train_expert":
+        if isinstance(sweep, SweepGroup):
+            raise SystemExit("error: train_expert trains the SAC expert: --agent takes no list")
         train_expert(args, sweep, argv)
         return
     out = Path(args.out) if args.out else _default_out(args.command, args.preset)
+    if isinstance(sweep, SweepGroup):
+        run_group(sweep, out, args, argv)
+        return
     _run_from_args(args, sweep, out, argv)
+
+
+GROUP_FILE = "group.json"
+"""In the output directory of a `SweepGroup`: its members' subdirectory names and the command."""
+
+
+def run_group(group: SweepGroup, out: Path, args: argparse.Namespace, argv: list[str]) -> bool:
+    """Train each member of `group` (one compiled program each) into `out/<member>`, one after
+    another; a finished member is not run again, an unfinished one resumes. Then the combined
+    summary (`results.write_group_summary`) and figure. Returns True when all are complete."""
+    out.mkdir(parents=True, exist_ok=True)
+    names = [name for name, _ in group.members]
+    path = out / GROUP_FILE
+    if path.exists() and json.loads(path.read_text())["members"] != names:
+        raise SystemExit(
+            f"error: {out} holds another group of runs ({json.loads(path.read_text())['members']}, "
+            f"now {names}). Nothing was overwritten: use another --out."
+        )
+    command = "python -m arld_jax.run " + " ".join(argv)
+    path.write_text(json.dumps({"members": names, "command": command}, indent=1) + "\n")
+    complete = True
+    for name, sweep in group.members:
+        member = out / name
+        if (member / "timing.json").exists():  # written only when a run directory is complete
+            print(f"{member}: complete", flush=True)
+            continue
+        result = _run_from_args(args, sweep, member, argv)
+        complete = complete and result["complete"]
+        if not complete:
+            break
+    if complete:
+        _write_group_results(out, not args.no_plots, print)
+    return complete
+
+
+def _write_group_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
+    from arld_jax import results
+
+    _, md_path = results.write_group_summary(out)
+    log(md_path.read_text())
+    if plots:
+        from arld_jax import plots as plots_mod
+
+        log(f"figure: {plots_mod.plot_group(out)}")
 
 
 def _run_from_args(

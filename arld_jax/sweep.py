@@ -25,6 +25,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
+from arld_jax import config as config_presets
 from arld_jax.config import STRATEGIES, SWEEPABLE, Config, HParams, hparams_from_config
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -146,6 +147,34 @@ class Sweep:
         return out
 
 
+@dataclass(frozen=True)
+class SweepGroup:
+    """Sweeps that cannot share a compiled program (one per agent family: their states differ),
+    trained one after another into subdirectories `agent-<name>` of one output directory, then
+    summarised together. `--agent td3,boot_td3` on the command line makes one."""
+
+    members: tuple[tuple[str, Sweep], ...]  # (subdirectory name, sweep), in order
+
+    def __post_init__(self) -> None:
+        names = [name for name, _ in self.members]
+        if len(set(names)) != len(names) or not names:
+            raise ValueError(f"SweepGroup members must have distinct names, got {names}")
+
+    @classmethod
+    def per_agent(cls, sweep: Sweep, agents: tuple[str, ...]) -> SweepGroup:
+        """The same sweep for each agent family."""
+        return cls(
+            tuple(
+                (f"agent-{a}", dataclasses.replace(sweep, cfg=sweep.cfg.replace(agent=a)))
+                for a in agents
+            )
+        )
+
+    @property
+    def num_runs(self) -> int:
+        return sum(s.num_runs for _, s in self.members)
+
+
 # ---------------------------------------------------------------- named sweep presets
 
 
@@ -203,8 +232,7 @@ def preset_experiment() -> Sweep:
 
 def preset_sac() -> Sweep:
     """Plain SAC on MJX HalfCheetah, 3 seeds, 100k env steps (issue: SAC learns on CPU)."""
-    cfg = Config(total_env_steps=100_000, replay_capacity=100_000, eval_every=5_000)
-    return Sweep(cfg=cfg, seeds=(0, 1, 2))
+    return Sweep(cfg=config_presets.halfcheetah(), seeds=(0, 1, 2))
 
 
 def preset_paper() -> Sweep:
@@ -213,15 +241,7 @@ def preset_paper() -> Sweep:
     4 strategies x 2 uncertainties. Pruned (b only for Bernoulli, t_query only for active, C only
     where queries happen): 142 cells x 10 seeds = 1,420 runs instead of the 16,000 of the full
     cartesian grid. Narrow it with overrides, e.g. `--strategy active --t_query 0.05,0.1,0.2`."""
-    cfg = Config(
-        total_env_steps=400_000,
-        replay_capacity=400_000,
-        eval_every=5_000,
-        num_eval_episodes=10,
-        budget=10_000,
-        window_size=5_000,
-        expert_path=SHIPPED_EXPERT_PATH,
-    )
+    cfg = config_presets.paper(expert_path=SHIPPED_EXPERT_PATH)
     sweep = _arld_cells(
         t_query=(0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7),
         query_prob=(0.1, 0.2, 0.3, 0.4, 0.5),
@@ -232,9 +252,7 @@ def preset_paper() -> Sweep:
 
 def preset_tiny() -> Sweep:
     """Seconds on the toy env (tests, smoke runs). Strategies that query use the toy expert."""
-    from arld_jax.config import tiny
-
-    return Sweep(cfg=tiny(), seeds=(0, 1))
+    return Sweep(cfg=config_presets.tiny(), seeds=(0, 1))
 
 
 SWEEP_PRESETS = {

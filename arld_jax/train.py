@@ -32,7 +32,7 @@ from arld_jax.envs import EnvState, make_env
 from arld_jax.evaluate import evaluate_policy
 from arld_jax.expert import Expert, ExpertContext
 from arld_jax.replay import ReplayState, make_prioritized_replay, priority_from_td
-from arld_jax.types import PRNGKey, Transition
+from arld_jax.types import PRNGKey, Transition, example_transition
 
 
 def only_if(pred: jax.Array, fn: Callable[[Any], Any], carry: Any) -> Any:
@@ -56,6 +56,19 @@ def compiler_options() -> dict[str, Any]:
     if jax.default_backend() != "cpu":
         return {}
     return {"xla_cpu_copy_insertion_use_region_analysis": True}
+
+
+def jit_chunk(trainer: Trainer, donate: bool = True) -> Callable[..., Any]:
+    """The one jit recipe of a training chunk, for the driver, the benchmarks and the tests:
+    `chunk(states, hps, first_period, num_periods) -> (states, PeriodMetrics)` vmapped over runs
+    (states and hps batched, `first_period` not, `num_periods` static), the state donated (updated
+    in place across chunks) and `compiler_options()`."""
+    return jax.jit(
+        jax.vmap(trainer.run_periods, in_axes=(0, 0, None, None)),
+        static_argnums=3,
+        donate_argnums=0 if donate else (),
+        compiler_options=compiler_options(),
+    )
 
 
 @flax.struct.dataclass
@@ -181,14 +194,7 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
     def init(key: PRNGKey, hp: HParams) -> TrainState:
         k_agent, k_env, k_run = jax.random.split(key, 3)
         agent_state = agent.init(k_agent, hp)
-        example = Transition(
-            obs=jnp.zeros(env.obs_dim),
-            action=jnp.zeros(env.action_dim),
-            reward=jnp.zeros(()),
-            next_obs=jnp.zeros(env.obs_dim),
-            terminated=jnp.zeros(()),
-            is_demo=jnp.zeros(()),
-        )
+        example = example_transition(env.obs_dim, env.action_dim)
         return TrainState(
             agent=agent_state,
             replay=per.init(example),

@@ -24,3 +24,17 @@ class Transition:
     next_obs: jax.Array  # [obs_dim]
     terminated: jax.Array  # [] float32, 1.0 stops bootstrapping
     is_demo: jax.Array  # [] float32, 1.0 if the expert acted (adds eps_demo to its priority)
+
+
+def example_transition(obs_dim: int, action_dim: int) -> Transition:
+    """One replay item of the given sizes (zeros): the replay's layout (`replay.init`)."""
+    import jax.numpy as jnp
+
+    return Transition(
+        obs=jnp.zeros(obs_dim),
+        action=jnp.zeros(action_dim),
+        reward=jnp.zeros(()),
+        next_obs=jnp.zeros(obs_dim),
+        terminated=jnp.zeros(()),
+        is_demo=jnp.zeros(()),
+    )

@@ -52,8 +52,8 @@ from arld_jax.config import Config, hparams_from_config
 from arld_jax.envs import Env, make_env
 from arld_jax.networks import NUM_CRITICS
 from arld_jax.replay import PrioritizedReplay, make_prioritized_replay, replay_nbytes
-from arld_jax.train import Trainer, compiler_options, make_train
-from arld_jax.types import Transition
+from arld_jax.train import Trainer, compiler_options, jit_chunk, make_train
+from arld_jax.types import Transition, example_transition
 
 SECTIONS: tuple[str, ...] = (
     "matmul",
@@ -186,18 +186,6 @@ def _fmt(x: Any) -> str:
     if isinstance(x, int):
         return f"{x:,}"
     return str(x)
-
-
-def example_transition(obs_dim: int, action_dim: int) -> Transition:
-    """One replay item of the given sizes (zeros), as train.py stores it."""
-    return Transition(
-        obs=jnp.zeros(obs_dim),
-        action=jnp.zeros(action_dim),
-        reward=jnp.zeros(()),
-        next_obs=jnp.zeros(obs_dim),
-        terminated=jnp.zeros(()),
-        is_demo=jnp.zeros(()),
-    )
 
 
 def random_batch(key: jax.Array, batch: int, obs_dim: int, action_dim: int) -> Transition:
@@ -656,12 +644,7 @@ def compile_trainer(trainer: Trainer, num_seeds: int) -> tuple[Any, Any, Any, di
     hps = broadcast_seeds(hparams_from_config(cfg), num_seeds)
     keys = jax.random.split(jax.random.key(cfg.seed), num_seeds)
     state = block(jax.jit(jax.vmap(trainer.init))(keys, hps))
-    run = jax.jit(
-        jax.vmap(trainer.run_periods, in_axes=(0, 0, None, None)),
-        static_argnums=3,
-        donate_argnums=0,
-        compiler_options=compiler_options(),
-    )
+    run = jit_chunk(trainer)
     start = time.perf_counter()
     lowered = run.lower(state, hps, jnp.int32(0), 1)
     lowered_at = time.perf_counter()

@@ -268,7 +268,7 @@ def test_partial_run_is_summarised_over_periods_present(tmp_path: Path) -> None:
         expert=None,
     )
     run = results.load_run(run_dir)
-    assert run["partial"] and run["periods"] == 2 and run["expected_periods"] == 4
+    assert run.partial and run.periods == 2 and run.expected_periods == 4
     sac, bq = results.summarize(run_dir)
     # final = period 1: 200 (c + 1) + 10 s; AUC = mean(100, 200) (c + 1) + 10 s
     assert sac["final_return_mean"] == pytest.approx(210.0)

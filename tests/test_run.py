@@ -12,8 +12,8 @@ import jax
 import numpy as np
 import pytest
 
-from arld_jax import run
-from arld_jax.sweep import Sweep, preset_tiny
+from arld_jax import plots, results, run
+from arld_jax.sweep import Sweep, SweepGroup, preset_tiny
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -310,3 +310,40 @@ def test_export_expert_from_a_run_acts_like_its_best_actor(uninterrupted, tmp_pa
     )
     # The exported actor is the trained one: far above an untrained policy (~20 on this toy env).
     assert float(ret) > 0.85 * sweep.cfg.episode_length
+
+
+# ---------------------------------------------------------------- groups (one program per agent)
+
+
+def test_agent_list_is_a_group_of_programs_with_one_summary(tmp_path, capsys):
+    """`--agent sac,td3` trains one compiled program per agent family into agent-<name>/, then
+    one summary of both; a rerun skips finished members; another group there is refused."""
+    argv = ["seed_sweep", "--preset", "tiny", "--agent", "sac,td3", "--seeds", "0"]
+    argv += ["--strategy", "none,greedy", "--total_env_steps", "1000", "--no_plots"]
+    args, group = run.parse_args(argv)
+    assert isinstance(group, SweepGroup)
+    assert [(name, s.cfg.agent) for name, s in group.members] == [
+        ("agent-sac", "sac"),
+        ("agent-td3", "td3"),
+    ]
+    assert all(s.sweep == {"strategy": ("none", "greedy")} for _, s in group.members)
+    out = tmp_path / "group"
+    assert run.run_group(group, out, args, argv)
+    rows = results.summarize_group(out)
+    assert [(r["agent"], r["cell_label"]) for r in rows] == [
+        ("sac", "strategy=none"),
+        ("sac", "strategy=greedy"),
+        ("td3", "strategy=none"),
+        ("td3", "strategy=greedy"),
+    ]
+    assert all(r["env_steps"] == 1000 for r in rows)
+    assert [r["demos_used_mean"] for r in rows] == [0, group.members[0][1].cfg.budget] * 2
+    md = (out / "summary.md").read_text()
+    assert "| td3 | strategy=greedy |" in md
+    capsys.readouterr()
+    assert run.run_group(group, out, args, argv)  # nothing left to train
+    assert capsys.readouterr().out.count(": complete") == 2
+    _, other = run.parse_args(argv[:4] + ["sac,boot_td3"] + argv[5:])
+    with pytest.raises(SystemExit, match="another group"):
+        run.run_group(other, out, args, argv)
+    assert plots.plot_group(out).exists()

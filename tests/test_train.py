@@ -13,7 +13,7 @@ from arld_jax import query
 from arld_jax.config import hparams_from_config, tiny
 from arld_jax.envs import toy_target_action
 from arld_jax.expert import toy_expert
-from arld_jax.train import compiler_options, make_train, only_if
+from arld_jax.train import jit_chunk, make_train, only_if
 
 TOY_EXPERT = toy_expert()
 SEEDS = (0, 1, 2)
@@ -231,11 +231,7 @@ def test_compiled_loop_copies_neither_the_replay_nor_the_agent_state():
     trainer = make_train(cfg)
     hps = _stack([hparams_from_config(cfg)] * 2)
     state = jax.jit(jax.vmap(trainer.init))(jax.random.split(jax.random.key(0), 2), hps)
-    run = jax.jit(
-        jax.vmap(trainer.run_periods, in_axes=(0, 0, None, None)),
-        static_argnums=3,
-        compiler_options=compiler_options(),
-    )
+    run = jit_chunk(trainer, donate=False)
     compiled = run.lower(state, hps, jnp.int32(0), 1).compile()
     copies = _loop_copies(compiled.as_text())
     replay_shapes = {tuple(x.shape) for x in jax.tree.leaves(state.replay) if x.ndim > 1}
