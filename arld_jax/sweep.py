@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -250,13 +251,61 @@ def preset_paper() -> Sweep:
     return Sweep(cfg=cfg, sweep=sweep, seeds=tuple(range(10)))
 
 
+def _arld_100k_config(**overrides: Any) -> Config:
+    """The protocol of the paper's comparison at a length this CPU can run (learning issue, part 4).
+
+    The paper (A.1): 400k env steps, 1 env, one update per env step, budget 10,000 demonstrated
+    steps, N_r = 5,000, b = 0.1 and t_query = 0.1 (its best values), C = 1 (its grid starts there),
+    evaluation every 5,000 steps. Here 100k env steps with the budget scaled to the length
+    (10,000 x 100k / 400k = 2,500), everything else as the paper; 5 deterministic evaluation
+    episodes. Plain SAC is still far below the expert at 100k (its learning curve), so
+    demonstrations have room to matter. b = 0.1 for both uncertainty measures (the paper's best b
+    for Noisy SAC was 0.4; one b keeps BQSAC and BQNoisySAC spending alike)."""
+    base: dict[str, Any] = dict(
+        total_env_steps=100_000,
+        replay_capacity=100_000,
+        eval_every=5_000,
+        num_eval_episodes=5,
+        budget=2_500,
+        window_size=5_000,
+        query_prob=0.1,
+        t_query=0.1,
+        demo_steps=1,
+        expert_path=SHIPPED_EXPERT_PATH,
+    )
+    base.update(overrides)
+    return Config(**base)
+
+
+def preset_arld() -> Sweep:
+    """The paper's comparison on this CPU: SAC, GQSAC, BQSAC, AQSAC x {sigma_theta, Noisy SAC},
+    5 seeds, 100k env steps at 1 env, budget 2,500 (40 runs in one program; hours on 2 cores)."""
+    return Sweep(cfg=_arld_100k_config(), sweep=_arld_cells(), seeds=tuple(range(5)))
+
+
+def preset_fig1() -> SweepGroup:
+    """The paper's Fig. 1 on this CPU: the TD3 family under ARLD on the `arld` protocol. TD3 and
+    Noisy TD3 (uncertainty 'extrinsic') share one program; Bootstrapped TD3 (its uncertainty is the
+    heads' disagreement) is the second. Each with none / greedy / Bernoulli / active, 5 seeds."""
+    cfg = _arld_100k_config()
+    td3 = Sweep(cfg=cfg.replace(agent="td3"), sweep=_arld_cells(), seeds=tuple(range(5)))
+    boot = Sweep(
+        cfg=cfg.replace(agent="boot_td3"),
+        sweep={"strategy": ("none", "greedy", "bernoulli", "active")},
+        seeds=tuple(range(5)),
+    )
+    return SweepGroup((("agent-td3", td3), ("agent-boot_td3", boot)))
+
+
 def preset_tiny() -> Sweep:
     """Seconds on the toy env (tests, smoke runs). Strategies that query use the toy expert."""
     return Sweep(cfg=config_presets.tiny(), seeds=(0, 1))
 
 
-SWEEP_PRESETS = {
+SWEEP_PRESETS: dict[str, Callable[[], Sweep | SweepGroup]] = {
     "default": preset_default,
+    "arld": preset_arld,
+    "fig1": preset_fig1,
     "experiment": preset_experiment,
     "sac": preset_sac,
     "paper": preset_paper,

@@ -12,7 +12,7 @@ import jax
 import numpy as np
 import pytest
 
-from arld_jax import plots, results, run
+from arld_jax import driver, plots, results, run, rundir
 from arld_jax.sweep import Sweep, SweepGroup, preset_tiny
 
 REPO = Path(__file__).resolve().parents[1]
@@ -143,20 +143,20 @@ def test_help_documents_every_field(capsys):
 def uninterrupted(tmp_path_factory):
     sweep = _sweep(strategy="none,greedy,active")
     out = tmp_path_factory.mktemp("full")
-    run.run_sweep(sweep, out, chunk_periods=1, plots=False, log=lambda *a: None)
+    driver.run_sweep(sweep, out, chunk_periods=1, plots=False, log=lambda *a: None)
     return sweep, out
 
 
 def test_resume_after_a_stop_equals_uninterrupted(uninterrupted, tmp_path):
     sweep, full = uninterrupted
-    first = run.run_sweep(
+    first = driver.run_sweep(
         sweep, tmp_path, chunk_periods=1, stop_after_chunks=2, plots=False, log=lambda *a: None
     )
     assert not first["complete"]
-    assert np.load(tmp_path / run.METRICS_FILE)["eval_return"].shape[1] == 2
-    second = run.run_sweep(sweep, tmp_path, chunk_periods=1, plots=False, log=lambda *a: None)
+    assert np.load(tmp_path / rundir.METRICS_FILE)["eval_return"].shape[1] == 2
+    second = driver.run_sweep(sweep, tmp_path, chunk_periods=1, plots=False, log=lambda *a: None)
     assert second["complete"]
-    a, b = np.load(full / run.METRICS_FILE), np.load(tmp_path / run.METRICS_FILE)
+    a, b = np.load(full / rundir.METRICS_FILE), np.load(tmp_path / rundir.METRICS_FILE)
     assert sorted(a.files) == sorted(b.files)
     for name in a.files:
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
@@ -168,15 +168,15 @@ def test_checkpoint_of_another_state_layout_is_refused(uninterrupted, tmp_path):
     import shutil
 
     sweep, full = uninterrupted
-    saved = json.loads((full / run.LAYOUT_FILE).read_text())
+    saved = json.loads((full / rundir.LAYOUT_FILE).read_text())
     assert int(saved["num_leaves"]) > 0 and len(saved["sha256"]) == 64
     out = tmp_path / "old"
     shutil.copytree(full, out)
-    (out / run.LAYOUT_FILE).write_text(json.dumps(saved | {"sha256": "0" * 64}))
-    metrics_before = (out / run.METRICS_FILE).read_bytes()
+    (out / rundir.LAYOUT_FILE).write_text(json.dumps(saved | {"sha256": "0" * 64}))
+    metrics_before = (out / rundir.METRICS_FILE).read_bytes()
     with pytest.raises(SystemExit, match=r"another layout .* Nothing was overwritten"):
-        run.run_sweep(sweep, out, chunk_periods=1, plots=False, log=lambda *a: None)
-    assert (out / run.METRICS_FILE).read_bytes() == metrics_before
+        driver.run_sweep(sweep, out, chunk_periods=1, plots=False, log=lambda *a: None)
+    assert (out / rundir.METRICS_FILE).read_bytes() == metrics_before
 
 
 class _Static:
@@ -198,11 +198,11 @@ def test_state_layout_is_the_same_in_every_process():
     a = {"env": _Node(np.zeros((2, 3, 4)), _Static())}
     b = {"env": _Node(np.zeros((2, 3, 4)), _Static())}
     assert str(jax.tree.structure(a)) != str(jax.tree.structure(b))  # the addresses differ
-    assert run.state_layout(a) == run.state_layout(b)
+    assert rundir.state_layout(a) == rundir.state_layout(b)
     c = {"env": _Node(np.zeros((2, 3, 5)), _Static())}
-    assert run.state_layout(c) != run.state_layout(a)
+    assert rundir.state_layout(c) != rundir.state_layout(a)
     renamed = {"envs": _Node(np.zeros((2, 3, 4)), _Static())}  # same shapes, another leaf path
-    assert run.state_layout(renamed) != run.state_layout(a)
+    assert rundir.state_layout(renamed) != rundir.state_layout(a)
 
 
 def test_other_config_in_same_directory_is_refused(uninterrupted):
@@ -210,7 +210,7 @@ def test_other_config_in_same_directory_is_refused(uninterrupted):
     before = (full / "config.json").read_text()
     other = _sweep(strategy="none,greedy,active", budget="7")
     with pytest.raises(SystemExit, match=r"holds a different run \(budget: 200 -> 7\)"):
-        run.run_sweep(other, full, chunk_periods=1, plots=False, log=lambda *a: None)
+        driver.run_sweep(other, full, chunk_periods=1, plots=False, log=lambda *a: None)
     assert (full / "config.json").read_text() == before
 
 
@@ -222,10 +222,10 @@ def test_field_added_later_at_its_default_does_not_block_resume(tmp_path):
     old = json.loads(json.dumps(identity))
     del old["config"]["update_before_add"]
     (tmp_path / "config.json").write_text(json.dumps(old))
-    assert run._check_or_write_identity(tmp_path, identity) is True
+    assert rundir.check_or_write_identity(tmp_path, identity) is True
     changed = _sweep(strategy="none,active", update_before_add="true").to_json()
     with pytest.raises(SystemExit, match=r"update_before_add: None -> True"):
-        run._check_or_write_identity(tmp_path, changed | {"preset": "tiny"})
+        rundir.check_or_write_identity(tmp_path, changed | {"preset": "tiny"})
 
 
 def test_results_files(uninterrupted):
@@ -234,7 +234,7 @@ def test_results_files(uninterrupted):
     assert saved["sweep"] == {"strategy": ["none", "greedy", "active"]}
     runs = json.loads((full / "runs.json").read_text())
     assert len(runs) == sweep.num_runs
-    metrics = np.load(full / run.METRICS_FILE)
+    metrics = np.load(full / rundir.METRICS_FILE)
     assert metrics["eval_return"].shape == (sweep.num_runs, sweep.cfg.num_evals)
     demos = metrics["demos_used"][:, -1]
     assert list(demos[:2]) == [0, 0] and list(demos[2:4]) == [sweep.cfg.budget] * 2
@@ -248,7 +248,7 @@ def test_needs_expert_for_halfcheetah_queries(tmp_path):
     cfg = base.cfg.replace(env_name="halfcheetah", expert_path=str(tmp_path / "nothing"))
     sweep = Sweep(cfg=cfg, sweep={"strategy": ("none", "active")}, seeds=(0,))
     with pytest.raises(SystemExit, match="No expert at"):
-        run.run_sweep(sweep, tmp_path / "out", plots=False, log=lambda *a: None)
+        driver.run_sweep(sweep, tmp_path / "out", plots=False, log=lambda *a: None)
     assert not (tmp_path / "out").exists()  # nothing written before the check
 
 
@@ -276,7 +276,7 @@ def test_sharded_over_two_devices_equals_one_device(uninterrupted, tmp_path):
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "2 device(s)" in proc.stdout
-    a, b = np.load(full / run.METRICS_FILE), np.load(tmp_path / run.METRICS_FILE)
+    a, b = np.load(full / rundir.METRICS_FILE), np.load(tmp_path / rundir.METRICS_FILE)
     for name in ("eval_return", "critic_loss", "uncertainty_trace"):
         np.testing.assert_allclose(
             a[name][:, :1], b[name][:, :1], rtol=1e-4, atol=1e-4, err_msg=name
@@ -294,9 +294,9 @@ def test_export_expert_from_a_run_acts_like_its_best_actor(uninterrupted, tmp_pa
     from arld_jax.expert import load_expert
 
     sweep, full = uninterrupted
-    run.export_expert(full, tmp_path / "expert")
+    driver.export_expert(full, tmp_path / "expert")
     meta = json.loads((tmp_path / "expert" / "expert.json").read_text())
-    final = np.load(full / run.METRICS_FILE)["eval_return"][:, -1]
+    final = np.load(full / rundir.METRICS_FILE)["eval_return"][:, -1]
     assert meta["eval_return"] == pytest.approx(float(final.max()))
     assert meta["train_env_steps"] == sweep.cfg.total_env_steps
     env = make_env(sweep.cfg)
@@ -328,7 +328,8 @@ def test_agent_list_is_a_group_of_programs_with_one_summary(tmp_path, capsys):
     ]
     assert all(s.sweep == {"strategy": ("none", "greedy")} for _, s in group.members)
     out = tmp_path / "group"
-    assert run.run_group(group, out, args, argv)
+    options = driver.RunOptions(plots=False, command="python -m arld_jax.run " + " ".join(argv))
+    assert driver.run_group(group, out, options)
     rows = results.summarize_group(out)
     assert [(r["agent"], r["cell_label"]) for r in rows] == [
         ("sac", "strategy=none"),
@@ -341,9 +342,9 @@ def test_agent_list_is_a_group_of_programs_with_one_summary(tmp_path, capsys):
     md = (out / "summary.md").read_text()
     assert "| td3 | strategy=greedy |" in md
     capsys.readouterr()
-    assert run.run_group(group, out, args, argv)  # nothing left to train
+    assert driver.run_group(group, out, options)  # nothing left to train
     assert capsys.readouterr().out.count(": complete") == 2
     _, other = run.parse_args(argv[:4] + ["sac,boot_td3"] + argv[5:])
     with pytest.raises(SystemExit, match="another group"):
-        run.run_group(other, out, args, argv)
+        driver.run_group(other, out, options)
     assert plots.plot_group(out).exists()

@@ -1,0 +1,375 @@
+"""The resumable driver: trains sweeps chunk by chunk with checkpoints, exports experts.
+
+`run_sweep` is the one place that compiles and runs a sweep (one program: `train.jit_chunk`), saving
+after every chunk in the format of `arld_jax.rundir`; rerunning the same sweep into the same
+directory resumes and ends with results identical to an uninterrupted run. `run_group` runs the
+members of a `SweepGroup` (one program per agent family) one after another. The command line is
+`arld_jax.run`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from arld_jax import config as config_mod
+from arld_jax.config import Config
+from arld_jax.rundir import (
+    CHECKPOINT_DIR,
+    GROUP_FILE,
+    LAYOUT_FILE,
+    METRICS_FILE,
+    check_layout,
+    check_or_write_identity,
+    checkpoint_key,
+    from_checkpoint,
+    layout_error,
+    save_npz,
+    state_layout,
+    state_samples,
+    to_checkpoint,
+)
+from arld_jax.sweep import REPO_ROOT, SHIPPED_EXPERT, Sweep, SweepGroup, resolve_expert_path
+
+
+@dataclasses.dataclass(frozen=True)
+class RunOptions:
+    """How to drive a sweep (none of it changes what is computed)."""
+
+    chunk_periods: int | None = None  # evaluation periods per compiled chunk (None: ~10 chunks)
+    stop_after_chunks: int | None = None  # stop early (to test resuming)
+    command: str = ""  # recorded in config.json
+    preset: str = ""
+    plots: bool = True
+    log: Callable[..., None] = print
+
+
+def enable_compilation_cache() -> None:
+    """Persistent XLA compilation cache: a second run of the same program skips the compile."""
+    import jax
+
+    cache = os.environ.get("ARLD_JAX_CACHE", str(REPO_ROOT / ".jax_cache"))
+    jax.config.update("jax_compilation_cache_dir", cache)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+
+
+def choose_chunk(num_evals: int, requested: int | None) -> int:
+    if requested is not None:
+        if requested < 1 or num_evals % requested:
+            raise SystemExit(
+                f"error: --chunk_periods {requested} must be >= 1 and divide the number of "
+                f"evaluation periods ({num_evals})"
+            )
+        return requested
+    divisors = [d for d in range(1, num_evals + 1) if num_evals % d == 0]
+    return min(divisors, key=lambda d: (abs(num_evals // d - 10), d))
+
+
+def run_sweep(
+    sweep: Sweep,
+    out: Path,
+    chunk_periods: int | None = None,
+    stop_after_chunks: int | None = None,
+    command: str = "",
+    preset: str = "",
+    plots: bool = True,
+    log=print,  # noqa: ANN001
+) -> dict[str, Any]:
+    """Train every run of `sweep` into `out`, resuming from its checkpoint if there is one.
+
+    Returns {"metrics": {field: [R, periods, ...]}, "complete": bool, ...}."""
+    import jax
+    import jax.numpy as jnp
+    import orbax.checkpoint as ocp
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+    from arld_jax.train import jit_chunk, make_train
+
+    cfg = sweep.cfg
+    expert = None
+    if sweep.needs_expert():
+        expert = expert_for(cfg)
+    trainer = make_train(cfg, expert)
+    identity = sweep.to_json() | {
+        "preset": preset,
+        "command": command,
+        "expert": expert.meta if expert is not None else None,
+        "devices": [str(d) for d in jax.devices()],
+    }
+    resumed = check_or_write_identity(out, identity)
+    (out / "runs.json").write_text(json.dumps(sweep.runs(), indent=1) + "\n")
+
+    # Runs axis, padded to a multiple of the device count and sharded over devices.
+    hps, keys = sweep.hparams_and_keys()
+    num_runs = sweep.num_runs
+    devices = jax.devices()
+    padded = -(-num_runs // len(devices)) * len(devices)
+    pad = lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], padded - num_runs, 0)])  # noqa: E731
+    hps, keys = jax.tree.map(pad, hps), pad(keys)
+    mesh = Mesh(np.array(devices), ("runs",))
+    sharding = NamedSharding(mesh, PartitionSpec("runs"))
+    hps, keys = jax.device_put((hps, keys), sharding)
+
+    chunk = choose_chunk(cfg.num_evals, chunk_periods)
+    num_chunks = cfg.num_evals // chunk
+    init = jax.jit(jax.vmap(trainer.init), out_shardings=sharding)
+    run_chunk = jit_chunk(trainer)
+
+    mngr = ocp.CheckpointManager(
+        (out / CHECKPOINT_DIR).absolute(),
+        options=ocp.CheckpointManagerOptions(max_to_keep=2, create=True),
+    )
+    t0 = time.time()
+    state = init(keys, hps)
+    metrics: dict[str, np.ndarray] = {}
+    done = 0
+    layout = state_layout(state)
+    if resumed and mngr.latest_step() is not None:
+        done = mngr.latest_step()
+        check_layout(out, layout, done)
+        abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, to_checkpoint(state))
+        try:
+            restored = mngr.restore(done, args=ocp.args.StandardRestore(abstract))
+        except Exception as err:  # a checkpoint from before LAYOUT_FILE existed, other layout
+            raise SystemExit(layout_error(out, done, f"restoring it failed: {err}")) from None
+        state = from_checkpoint(restored, state)
+        saved = np.load(out / METRICS_FILE)
+        metrics = {
+            k: saved[k][:, : done * chunk] for k in saved.files if not k.startswith("state_")
+        }
+        log(
+            f"resuming {out} after chunk {done}/{num_chunks} ({done * chunk * cfg.eval_every:,} env steps)"
+        )
+    (out / LAYOUT_FILE).write_text(json.dumps(layout) + "\n")  # the layout of what is saved below
+    compile_start = time.time()
+    compiled = run_chunk.lower(state, hps, jnp.int32(0), chunk).compile()
+    compile_seconds = time.time() - compile_start
+    log(
+        f"compiled in {compile_seconds:.0f} s; {num_runs} runs x {cfg.total_env_steps:,} env steps, "
+        f"{num_chunks} chunks of {chunk * cfg.eval_every:,} steps, {len(devices)} device(s)"
+    )
+
+    train_seconds = 0.0
+    chunks_this_call = 0
+    for c in range(done, num_chunks):
+        start = time.time()
+        state, m = compiled(state, hps, jnp.int32(c * chunk))
+        m = jax.tree.map(lambda x: np.asarray(x)[:num_runs], m)
+        train_seconds += time.time() - start
+        for k, v in dataclasses.asdict(m).items():
+            metrics[k] = np.concatenate([metrics[k], v], axis=1) if k in metrics else v
+        samples = state_samples(state, num_runs)
+        save_npz(out / METRICS_FILE, metrics | samples)  # before the checkpoint (see resume)
+        mngr.save(c + 1, args=ocp.args.StandardSave(to_checkpoint(state)))
+        mngr.wait_until_finished()
+        chunks_this_call += 1
+        steps_done = (c + 1) * chunk * cfg.eval_every
+        rate = chunks_this_call * chunk * cfg.eval_every * num_runs / max(train_seconds, 1e-9)
+        eta = (num_chunks - c - 1) * train_seconds / chunks_this_call
+        latest = np.nanmean(m.eval_return[:, -1])
+        log(
+            f"[{c + 1}/{num_chunks}] env steps {steps_done:,}/{cfg.total_env_steps:,} per run | "
+            f"{rate:,.0f} env steps/s (all runs) | ETA {eta / 60:.1f} min | "
+            f"eval return {latest:.1f} (mean of runs)"
+        )
+        if stop_after_chunks is not None and chunks_this_call >= stop_after_chunks:
+            break
+    complete = metrics and metrics["eval_return"].shape[1] == cfg.num_evals
+    timing = {
+        "wall_seconds": time.time() - t0,
+        "train_seconds": train_seconds,
+        "compile_seconds": compile_seconds,
+        "env_steps_per_second": (
+            chunks_this_call * chunk * cfg.eval_every * num_runs / train_seconds
+            if train_seconds
+            else float("nan")
+        ),
+        "num_runs": num_runs,
+        "devices": len(devices),
+    }
+    if complete:
+        (out / "timing.json").write_text(json.dumps(timing, indent=2) + "\n")
+        write_results(out, plots, log)
+    return {"metrics": metrics, "complete": bool(complete), "state": state, "timing": timing}
+
+
+def expert_for(cfg: Config):  # noqa: ANN202
+    from arld_jax.envs import make_env
+    from arld_jax.expert import load_expert, read_expert_meta, toy_expert
+
+    if cfg.env_name == "toy" and cfg.expert_path is None:
+        return toy_expert()
+    if cfg.expert_path is None:
+        raise SystemExit(
+            "error: a query strategy other than 'none' needs an expert: set --expert_path "
+            f"(the shipped HalfCheetah expert is {SHIPPED_EXPERT})"
+        )
+    try:
+        path = resolve_expert_path(cfg.expert_path)
+        read_expert_meta(path)  # fail fast, before building the env
+        env = make_env(cfg)
+        return load_expert(path, env.obs_dim, env.action_dim, cfg.expert_stochastic)
+    except (FileNotFoundError, ValueError) as err:
+        raise SystemExit(f"error: {err}") from None
+
+
+def write_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
+    from arld_jax import results
+
+    csv_path, md_path = results.write_summary(out)
+    log(md_path.read_text())
+    if plots:
+        from arld_jax import plots as plots_mod
+
+        for p in plots_mod.plot_all(out):
+            log(f"figure: {p}")
+
+
+def run_and_report(sweep: Sweep, out: Path, options: RunOptions) -> dict[str, Any]:
+    """`run_sweep` with `options`, saying where the results are or how to resume."""
+    options.log(f"output directory: {out}")
+    result = run_sweep(
+        sweep,
+        out,
+        options.chunk_periods,
+        options.stop_after_chunks,
+        command=options.command,
+        preset=options.preset,
+        plots=options.plots,
+        log=options.log,
+    )
+    if result["complete"]:
+        options.log(f"results in {out}")
+    else:
+        options.log(f"stopped before the end; rerun the same command to resume: {out}")
+    return result
+
+
+def train_expert(sweep: Sweep, out: Path, options: RunOptions) -> Path:
+    """Train plain SAC over seeds into out/training, then save the best seed's actor in `out`."""
+    if sweep.sweep:
+        raise SystemExit("error: train_expert takes no swept fields (only --seeds)")
+    sweep = dataclasses.replace(sweep, cfg=sweep.cfg.replace(strategy="none"))
+    run_dir = out / "training"
+    result = run_and_report(sweep, run_dir, options)
+    if not result["complete"]:
+        return run_dir
+    return export_expert(run_dir, out)
+
+
+def export_expert(run_dir: Path, out: Path) -> Path:
+    """Save, as the expert, the actor of the run with the best latest evaluation return in the
+    latest checkpoint of `run_dir` (a finished or a still-running plain-SAC run)."""
+    import jax
+    import orbax.checkpoint as ocp
+
+    from arld_jax.envs import make_env
+    from arld_jax.expert import save_expert
+    from arld_jax.train import make_train
+
+    saved = json.loads((run_dir / "config.json").read_text())
+    cfg_dict = dict(saved["config"], hidden_sizes=tuple(saved["config"]["hidden_sizes"]))
+    cfg = Config(**cfg_dict)
+    if cfg.agent != "sac":
+        raise SystemExit(
+            f"error: {run_dir} trained agent {cfg.agent!r}; the expert is a SAC actor (paper A.1: "
+            "a pre-trained prioritized SAC model), export a run of agent 'sac'"
+        )
+    mngr = ocp.CheckpointManager((run_dir / CHECKPOINT_DIR).absolute())
+    step = mngr.latest_step()
+    if step is None:
+        raise SystemExit(f"error: {run_dir} has no checkpoint yet")
+    restored = mngr.restore(step, args=ocp.args.StandardRestore())
+    # Which flat leaves are the actor's: the structure of one run's TrainState (no compile).
+    trainer = make_train(cfg)
+    hp = config_mod.hparams_from_config(cfg)
+    template = jax.eval_shape(trainer.init, jax.random.key(0), hp)
+    flat, _ = jax.tree_util.tree_flatten_with_path(template)
+    actor_leaves = {}
+    for i, (path, _) in enumerate(flat):
+        keys = jax.tree_util.keystr(path)
+        if keys.startswith(".agent.actor_params"):
+            actor_leaves[i] = np.asarray(restored[checkpoint_key(i)])
+    metrics = np.load(run_dir / METRICS_FILE)
+    periods = metrics["eval_return"].shape[1]
+    latest = metrics["eval_return"][:, periods - 1]
+    best = int(np.nanargmax(latest))
+    actor_flat = [actor_leaves[i][best] for i in sorted(actor_leaves)]
+    actor_template = template.agent.actor_params
+    actor = jax.tree.unflatten(jax.tree.structure(actor_template), actor_flat)
+    env = make_env(cfg)
+    runs = json.loads((run_dir / "runs.json").read_text())
+    env_steps = int(metrics["env_steps"][best, periods - 1])
+    meta = {
+        "env_name": cfg.env_name,
+        "backend": cfg.backend,
+        "obs_dim": env.obs_dim,
+        "action_dim": env.action_dim,
+        "hidden_sizes": list(cfg.hidden_sizes),
+        "log_std_min": cfg.log_std_min,
+        "log_std_max": cfg.log_std_max,
+        "seed": runs[best]["seed"],
+        "train_env_steps": env_steps,
+        "run_total_env_steps": cfg.total_env_steps,
+        "checkpoint_step": step,
+        "eval_return": float(latest[best]),
+        "eval_episodes": cfg.num_eval_episodes,
+        "eval_return_all_runs": {
+            f"run {r['run']} ({r['cell_label']}, seed {r['seed']})": float(ret)
+            for r, ret in zip(runs, latest, strict=True)
+        },
+        "training_command": saved.get("command"),
+        "training_run": str(run_dir),
+    }
+    path = save_expert(out, actor, meta)
+    print(
+        f"expert (seed {meta['seed']}, {env_steps:,} env steps, eval return "
+        f"{meta['eval_return']:.1f}) saved to {path}"
+    )
+    return path
+
+
+def run_group(group: SweepGroup, out: Path, options: RunOptions) -> bool:
+    """Train each member of `group` (one compiled program each) into `out/<member>`, one after
+    another; a finished member is not run again, an unfinished one resumes. Then the combined
+    summary (`results.write_group_summary`) and figure. Returns True when all are complete."""
+    out.mkdir(parents=True, exist_ok=True)
+    names = [name for name, _ in group.members]
+    path = out / GROUP_FILE
+    if path.exists() and json.loads(path.read_text())["members"] != names:
+        raise SystemExit(
+            f"error: {out} holds another group of runs ({json.loads(path.read_text())['members']}, "
+            f"now {names}). Nothing was overwritten: use another --out."
+        )
+    path.write_text(json.dumps({"members": names, "command": options.command}, indent=1) + "\n")
+    complete = True
+    for name, sweep in group.members:
+        member = out / name
+        if (member / "timing.json").exists():  # written only when a run directory is complete
+            options.log(f"{member}: complete")
+            continue
+        result = run_and_report(sweep, member, options)
+        complete = complete and result["complete"]
+        if not complete:
+            break
+    if complete:
+        write_group_results(out, options.plots, options.log)
+    return complete
+
+
+def write_group_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
+    from arld_jax import results
+
+    _, md_path = results.write_group_summary(out)
+    log(md_path.read_text())
+    if plots:
+        from arld_jax import plots as plots_mod
+
+        log(f"figure: {plots_mod.plot_group(out)}")
