@@ -1,4 +1,4 @@
-"""SAC losses (Haarnoja et al. 2018a/b), written once as pure functions of arrays.
+"""SAC losses (Haarnoja et al. 2018a/b) and TD3 targets (Fujimoto et al. 2018), written once as pure functions of arrays.
 
 Each loss takes the parameters it differentiates first (Brax style), so `jax.value_and_grad` applies
 directly. The soft target is written for ONE transition and vmapped (rlax style).
@@ -55,3 +55,44 @@ def alpha_loss_from_values(
 ) -> jax.Array:
     """Temperature loss, Haarnoja et al. 2018b eq. (18): mean -alpha (log pi(a|s) + target_entropy)."""
     return -jnp.exp(log_alpha) * jnp.mean(jax.lax.stop_gradient(log_prob) + target_entropy)
+
+
+# ---------------------------------------------------------------- TD3 (Fujimoto et al. 2018)
+
+
+def smoothed_target_action(
+    next_action: jax.Array, noise: jax.Array, noise_clip: float
+) -> jax.Array:
+    """Target policy smoothing of one transition (Fujimoto et al. 2018, Algorithm 1):
+
+    a' = clip(pi_targ(s') + clip(eps, -c, c), -1, 1), eps ~ N(0, sigma^2) given as `noise` [A]
+    (already scaled by sigma), `next_action` = tanh(mu_targ(s')) [A]. The outer clip to the action
+    bounds is the authors' code (`clamp(-max_action, max_action)`); the paper's Algorithm 1 omits it.
+    """
+    return jnp.clip(next_action + jnp.clip(noise, -noise_clip, noise_clip), -1.0, 1.0)
+
+
+def td3_q_target(
+    reward: jax.Array,
+    terminated: jax.Array,
+    next_q: jax.Array,
+    gamma: jax.Array,
+    reward_scale: jax.Array,
+) -> jax.Array:
+    """Clipped double-Q target of one transition (Fujimoto et al. 2018, Algorithm 1):
+
+    y = reward_scale * r + gamma * (1 - terminated) * min_k Q_targ_k(s', a'), with a' the smoothed
+    target action (`smoothed_target_action`). `next_q` is [num_critics]. This is `soft_q_target`
+    with alpha = 0; truncation is not termination (terminated = 0 at a time limit).
+    """
+    return reward_scale * reward + gamma * (1.0 - terminated) * jnp.min(next_q)
+
+
+def deterministic_actor_loss_from_values(q0: jax.Array, weights: jax.Array) -> jax.Array:
+    """Deterministic policy-gradient loss (Silver et al. 2014; TD3 differentiates the first critic
+    only, Fujimoto et al. 2018 Algorithm 1): L = -mean_i w_i Q_0(s_i, pi(s_i)).
+
+    q0: [B] the first critic at the actor's action; weights: [B], ones for TD3, the bootstrap mask
+    of a head for Bootstrapped TD3 (its head learns only from the transitions it was dealt).
+    """
+    return -jnp.mean(weights * q0)

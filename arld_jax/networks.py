@@ -158,3 +158,96 @@ def sample_action(policy: PolicyOutput, key: PRNGKey) -> tuple[jax.Array, jax.Ar
 def deterministic_action(policy: PolicyOutput) -> jax.Array:
     """The evaluation action tanh(mu(s)) (paper 3.2: noise removed when validating)."""
     return jnp.tanh(policy.mean)
+
+
+# ---------------------------------------------------------------- TD3 family (Fujimoto et al. 2018)
+
+
+@flax.struct.dataclass
+class DeterministicOutput:
+    """A deterministic actor's output (all [..., action_dim]); the action is tanh(mean)."""
+
+    mean: jax.Array  # pre-tanh mu(s); the perturbed mean mu~ for Noisy TD3
+    mean_var: jax.Array  # analytic Var[mu~] = phi^T diag(sigma_w^2) phi + sigma_b^2 (paper 3.1)
+
+
+class DeterministicActor(nn.Module):
+    """TD3's actor a = tanh(mu(s)) (Fujimoto et al. 2018), with SAC's torso and noisy mean head.
+
+    The same `MLP_0` torso and `NoisyDense` "mean_head" as `Actor`, without the log-std head: with
+    `noise_scale = 0` it is TD3's deterministic actor, with 1 it is Noisy TD3 (parameter noise on the
+    actor, Plappert et al. 2017; independent Gaussian noise, Fortunato et al. 2017)."""
+
+    action_dim: int
+    hidden_sizes: Sequence[int] = (256, 256)
+    sigma_init: float = 0.017
+    dtype: jnp.dtype = jnp.float32
+
+    @nn.compact
+    def __call__(
+        self, obs: jax.Array, noise_key: PRNGKey, noise_scale: jax.Array
+    ) -> DeterministicOutput:
+        phi = MLP(self.hidden_sizes, self.dtype)(obs)
+        mean, mean_var = NoisyDense(self.action_dim, self.sigma_init, name="mean_head")(
+            phi, noise_key, noise_scale
+        )
+        return DeterministicOutput(mean=mean, mean_var=mean_var)
+
+
+class MultiHeadActor(nn.Module):
+    """Bootstrapped actor: K deterministic heads on one shared torso (Osband et al. 2016, carried
+    from DQN's Q heads to TD3's actor). Output: pre-tanh means [..., K, action_dim]."""
+
+    action_dim: int
+    num_heads: int
+    hidden_sizes: Sequence[int] = (256, 256)
+    dtype: jnp.dtype = jnp.float32
+
+    @nn.compact
+    def __call__(self, obs: jax.Array) -> jax.Array:
+        phi = MLP(self.hidden_sizes, self.dtype)(obs)
+        out = nn.Dense(self.num_heads * self.action_dim, name="heads")(phi)
+        return out.reshape(*out.shape[:-1], self.num_heads, self.action_dim)
+
+
+class MultiHeadQNetwork(nn.Module):
+    """One critic torso with K linear Q heads: Q_k(s, a), k = 1..K (Osband et al. 2016).
+
+    `action` is either one action per state, [..., A] (every head scores it: the critic loss on
+    replayed actions, one torso pass), or one action per head, [..., K, A] (head k scores its own
+    action, e.g. its own actor's: K torso passes, head k's output kept). Output [..., K]."""
+
+    num_heads: int
+    hidden_sizes: Sequence[int] = (256, 256)
+    dtype: jnp.dtype = jnp.float32
+
+    @nn.compact
+    def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
+        per_head = action.ndim == obs.ndim + 1
+        if per_head:
+            obs = jnp.broadcast_to(obs[..., None, :], (*action.shape[:-1], obs.shape[-1]))
+        x = MLP(self.hidden_sizes, self.dtype)(jnp.concatenate([obs, action], axis=-1))
+        q = nn.Dense(self.num_heads, name="head")(x)  # [..., K] or [..., K(action), K(head)]
+        return jnp.diagonal(q, axis1=-2, axis2=-1) if per_head else q
+
+
+class MultiHeadTwinCritic(nn.Module):
+    """Bootstrapped twin critics: two independent torsos (`q0`, `q1`, as in `TwinCritic`, so the
+    clipped double-Q estimates stay independent), each with K heads. Output [..., K, NUM_CRITICS].
+
+    Shared torsos rather than K x 2 separate networks: the same cost as `TwinCritic` on replayed
+    actions, and bootstrapped DQN's own layout (one torso, K heads)."""
+
+    num_heads: int
+    hidden_sizes: Sequence[int] = (256, 256)
+    dtype: jnp.dtype = jnp.float32
+
+    @nn.compact
+    def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
+        qs = [
+            MultiHeadQNetwork(self.num_heads, self.hidden_sizes, self.dtype, name=f"q{k}")(
+                obs, action
+            )
+            for k in range(NUM_CRITICS)
+        ]
+        return jnp.stack(qs, axis=-1)

@@ -43,6 +43,9 @@ RELEVANT_FOR: dict[str, tuple[str, ...]] = {
     "eps_demo": _QUERYING,
 }
 """Swept field -> the strategies whose runs it can change (pruning; every other field: all)."""
+IGNORES_UNCERTAINTY: tuple[str, ...] = ("boot_td3",)
+"""Agents with one uncertainty of their own (Bootstrapped TD3: its heads' disagreement), for which a
+swept `uncertainty` changes nothing (pruned)."""
 
 
 def resolve_expert_path(path: str) -> Path:
@@ -96,6 +99,8 @@ class Sweep:
                 cell = {
                     k: v for k, v in cell.items() if strategy in RELEVANT_FOR.get(k, (strategy,))
                 }
+                if self.cfg.agent in IGNORES_UNCERTAINTY:
+                    cell.pop("uncertainty", None)
             key = tuple(sorted((k, repr(v)) for k, v in cell.items()))
             if key not in seen:
                 seen.add(key)

@@ -348,3 +348,12 @@ def test_agent_list_is_a_group_of_programs_with_one_summary(tmp_path, capsys):
     with pytest.raises(SystemExit, match="another group"):
         driver.run_group(other, out, options)
     assert plots.plot_group(out).exists()
+
+
+def test_uncertainty_is_pruned_for_bootstrapped_td3():
+    """Bootstrapped TD3's uncertainty is its heads' disagreement: sweeping intrinsic/extrinsic
+    would train the same runs twice, so its cells drop the field (TD3's keep it: Noisy TD3)."""
+    boot = _sweep(agent="boot_td3", strategy="none,active", uncertainty="intrinsic,extrinsic")
+    assert [c for c in boot.cells()] == [{"strategy": "none"}, {"strategy": "active"}]
+    td3 = _sweep(agent="td3", strategy="none,active", uncertainty="intrinsic,extrinsic")
+    assert len(td3.cells()) == 4

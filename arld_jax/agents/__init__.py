@@ -5,12 +5,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from arld_jax.agents import sac
+from arld_jax.agents import boot_td3, sac, td3
 from arld_jax.agents.base import Acting, Agent, AgentState, UpdateMetrics
 from arld_jax.config import AGENT_NAMES, Config
 
 AGENTS: dict[str, Callable[[Config, int, int], Agent]] = {
     "sac": sac.make,
+    "td3": td3.make,
+    "boot_td3": boot_td3.make,
 }
 """Agent family -> its constructor. `Config.agent` names one; `hp.noisy` picks the noisy variant."""
 
