@@ -40,11 +40,18 @@ class ExpertContext:
 class Expert(NamedTuple):
     """Expert parameters and an acting function act(params, obs [n, d], key, context) -> action
     [n, A]. A saved policy ignores the context; the loop calls `act` only at iterations where
-    some env of the run is demonstrated (a `lax.cond`), so an expert may be slow or a person."""
+    some env of the run is demonstrated (a `lax.cond`), so an expert may be slow or a person.
+
+    A row of NaNs from `act` hands that env's query back to the agent: the step is the agent's
+    (not a demonstration), the rest of the query is cancelled and its budget is not spent.
+    `observe(obs, context)`, if set, sees every iteration (a person's page shows the states before
+    a query; `arld_jax.human`); it must be an ordered host callback, so such an expert runs one run
+    at a time (no vmap)."""
 
     params: Params
     act: Callable[[Params, jax.Array, PRNGKey, ExpertContext | None], jax.Array]
     meta: dict[str, Any]
+    observe: Callable[[jax.Array, ExpertContext], Any] | None = None
 
 
 def toy_expert() -> Expert:

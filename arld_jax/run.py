@@ -258,6 +258,11 @@ def _default_out(command: str, preset: str) -> Path:
 
 def main(argv: list[str] | None = None) -> None:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["demonstrate"]:  # a person as the expert, in the browser (arld_jax.human)
+        from arld_jax.human import main as demonstrate_main
+
+        demonstrate_main(argv[1:])
+        return
     args, sweep = parse_args(argv)
     if args.command == "export_expert":
         driver.export_expert(Path(args.run_dir), Path(args.out) if args.out else SHIPPED_EXPERT)

@@ -279,7 +279,17 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
             budget=hp.budget,
             env_step=it * num_envs,
         )
+        if expert is not None and expert.observe is not None:
+            expert.observe(obs, context)  # a host side effect (a person's page): one run only
         expert_action = expert_act(obs, k_expert, context)
+        # An expert may hand a query back (a row of NaNs): the step is the agent's, the rest of
+        # the query is cancelled and its budget returned (a person pressing "hand back").
+        declined = is_demo & jnp.any(jnp.isnan(expert_action), axis=-1)
+        is_demo = is_demo & ~declined
+        qstate = qstate.replace(
+            demos_used=qstate.demos_used - jnp.sum(declined).astype(jnp.int32),
+            demo_remaining=jnp.where(declined, 0, qstate.demo_remaining),
+        )
         action = jnp.where(is_demo[:, None], expert_action, agent_action)
         chex.assert_shape(action, (num_envs, env.action_dim))
 

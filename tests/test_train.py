@@ -245,3 +245,30 @@ def test_compiled_loop_copies_neither_the_replay_nor_the_agent_state():
     _, got = compiled(state, hps, jnp.int32(0))
     for name in ("eval_return", "critic_loss", "actor_loss", "uncertainty_trace"):
         np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
+
+
+def test_an_expert_that_hands_back_spends_no_budget_and_adds_no_demo():
+    """An expert answering NaN for env 0 declines its queries (a person's "hand back"): env 0's
+    steps stay the agent's, not is_demo, and only env 1's demonstrated steps are spent. (Greedy
+    asks env 0 first at every step, so the last unit of budget goes to env 0 and comes back each
+    time: env 1 gets budget - 1 steps.)"""
+    cfg = tiny(strategy="greedy", budget=60, total_env_steps=1000, eval_every=500)
+
+    def act(params, obs, key, context=None):  # noqa: ANN001, ANN202
+        action = toy_target_action(obs)
+        return action.at[0].set(jnp.nan)
+
+    expert = toy_expert()._replace(act=act)
+    trainer = make_train(cfg, expert)
+    state, metrics = jax.jit(trainer.train)(jax.random.key(0), hparams_from_config(cfg))
+    assert int(metrics.demos_used[-1]) == cfg.budget - 1
+    size = int(state.replay.size)
+    is_demo = np.asarray(state.replay.data.is_demo)[:size]
+    action = np.asarray(state.replay.data.action)[:size]
+    obs = np.asarray(state.replay.data.obs)[:size]
+    assert not np.any(np.isnan(action))
+    assert int(is_demo.sum()) == cfg.budget - 1
+    # The demonstrated items are env 1's expert actions (items alternate env 0, env 1).
+    np.testing.assert_array_equal(np.flatnonzero(is_demo) % 2, 1)
+    demo = is_demo == 1
+    np.testing.assert_allclose(action[demo], np.asarray(toy_target_action(obs[demo])), atol=1e-6)
