@@ -69,3 +69,19 @@ def test_fresh_initial_state_every_episode_and_true_next_obs(cheetah_run):
     np.testing.assert_allclose(next_obs[inner], obs[inner + 1], atol=1e-5)
     assert not np.allclose(next_obs[ends[:-1]], obs[ends[:-1] + 1], atol=1e-3)
     assert float(np.asarray(data.terminated).max()) == 0.0
+
+
+def test_gait_metric_matches_the_visited_states(cheetah_run):
+    """The per-period upside-down fraction is the mean of `gait.upside_down` over the states the
+    run visited in that period (checked against the replay, which holds every visited state here),
+    and the fresh cheetah of every episode start is upright."""
+    from arld_jax import gait
+
+    cfg, state, metrics = cheetah_run
+    obs = np.asarray(state.replay.data.obs).reshape(cfg.num_evals, -1, 17)
+    expected = np.mean(gait.upside_down(obs), axis=1)
+    np.testing.assert_allclose(np.asarray(metrics.upside_down), expected, atol=1e-6)
+    starts = obs.reshape(cfg.num_iterations, cfg.num_envs, 17)[:: cfg.episode_length]
+    assert not np.any(gait.upside_down(starts))
+    flipped = np.asarray(metrics.eval_upside_down)
+    assert np.all((flipped >= 0) & (flipped <= 1))
