@@ -373,3 +373,45 @@ def write_group_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
         from arld_jax import plots as plots_mod
 
         log(f"figure: {plots_mod.plot_group(out)}")
+
+
+def evaluate_expert(path: Path, episodes: int = 10, seed: int = 12345) -> dict[str, Any]:
+    """Roll out the saved expert at `path` deterministically for `episodes` fresh episodes (new
+    random initial states, seed `seed`, not a training seed) and report the mean return with its
+    95% CI, every episode's return and the share of its states upside down (`env.upside_down`)."""
+    import jax
+    import jax.numpy as jnp
+
+    from arld_jax.envs import make_env
+    from arld_jax.expert import load_expert, read_expert_meta
+    from arld_jax.results import mean_ci95
+
+    meta = read_expert_meta(path)
+    cfg = Config(env_name=meta["env_name"], backend=meta.get("backend", "mjx"))
+    env = make_env(cfg)
+    expert = load_expert(path, env.obs_dim, env.action_dim)
+
+    @jax.jit
+    def rollout(key: jax.Array) -> tuple[jax.Array, jax.Array]:
+        def step(state, _):  # noqa: ANN001, ANN202
+            flipped = env.upside_down(state.obs)
+            state = env.step(state, expert.act(expert.params, state.obs, key))
+            return state, (state.reward, flipped)
+
+        _, (rewards, flipped) = jax.lax.scan(
+            step, env.reset(key, episodes), None, length=cfg.episode_length
+        )
+        return jnp.sum(rewards, axis=0), jnp.mean(flipped, axis=0)
+
+    returns, flipped = (np.asarray(x) for x in rollout(jax.random.key(seed)))
+    mean, ci = mean_ci95(returns)
+    return {
+        "path": str(path),
+        "episodes": episodes,
+        "seed": seed,
+        "return_mean": mean,
+        "return_ci95": ci,
+        "returns": returns.round(1).tolist(),
+        "upside_down": float(flipped.mean()),
+        "meta_eval_return": meta.get("eval_return"),
+    }

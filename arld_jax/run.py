@@ -19,6 +19,7 @@ import ast
 import dataclasses
 import difflib
 import inspect
+import json
 import sys
 import time
 from pathlib import Path
@@ -207,6 +208,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="save the best run's actor from the latest checkpoint of a plain-SAC run as the expert",
     )
     export.add_argument("run_dir")
+    check = sub.add_parser(
+        "evaluate_expert",
+        help="roll out a saved expert deterministically on fresh episodes: return and gait",
+    )
+    check.add_argument("expert_dir", nargs="?", default=str(SHIPPED_EXPERT))
+    check.add_argument("--episodes", type=int, default=10)
+    check.add_argument("--seed", type=int, default=12345, help="of the initial states")
     export.add_argument("--out", default=None, help=f"expert directory (default {SHIPPED_EXPERT})")
     return parser
 
@@ -227,7 +235,7 @@ def parse_args(argv: list[str]) -> tuple[argparse.Namespace, Sweep | SweepGroup 
             else:
                 msgs.append(f"unexpected argument {u!r}")
         parser.error("; ".join(msgs) + ". See --help for every field.")
-    if args.command in ("plot", "export_expert"):
+    if args.command in ("plot", "export_expert", "evaluate_expert"):
         return args, None
     overrides = {
         n: getattr(args, n)
@@ -266,6 +274,20 @@ def main(argv: list[str] | None = None) -> None:
     args, sweep = parse_args(argv)
     if args.command == "export_expert":
         driver.export_expert(Path(args.run_dir), Path(args.out) if args.out else SHIPPED_EXPERT)
+        return
+    if args.command == "evaluate_expert":
+        if args.episodes < 2:
+            raise SystemExit(f"error: --episodes {args.episodes}: at least 2 (for a CI)")
+        try:
+            r = driver.evaluate_expert(Path(args.expert_dir), args.episodes, args.seed)
+        except (FileNotFoundError, ValueError) as err:
+            raise SystemExit(f"error: {err}") from None
+        print(json.dumps(r, indent=1))
+        print(
+            f"expert {r['path']}: deterministic return {r['return_mean']:.1f} ± "
+            f"{r['return_ci95']:.1f} (95% CI, {r['episodes']} fresh episodes), "
+            f"{100 * r['upside_down']:.1f}% of states upside down"
+        )
         return
     if args.command == "plot":
         run_dir = Path(args.run_dir)

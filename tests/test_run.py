@@ -286,6 +286,20 @@ def test_sharded_over_two_devices_equals_one_device(uninterrupted, tmp_path):
     np.testing.assert_array_equal(a["demos_used"][not_active], b["demos_used"][not_active])
 
 
+def test_evaluate_expert_rolls_out_fresh_episodes(uninterrupted, tmp_path):
+    """`evaluate_expert` reports the exported actor's deterministic return on fresh episodes (a
+    trained toy policy earns close to 1 per step, an untrained one far less) and no gait."""
+    _, full = uninterrupted
+    driver.export_expert(full, tmp_path / "expert")
+    report = driver.evaluate_expert(tmp_path / "expert", episodes=4, seed=3)
+    assert len(report["returns"]) == 4 and report["episodes"] == 4
+    assert report["return_mean"] == pytest.approx(np.mean(report["returns"]), abs=0.1)
+    assert report["return_mean"] > 0.85 * 1000  # Config's default 1,000-step episodes
+    assert report["upside_down"] == 0.0  # the toy env has no body
+    with pytest.raises(SystemExit, match="at least 2"):
+        run.main(["evaluate_expert", str(tmp_path / "expert"), "--episodes", "1"])
+
+
 def test_export_expert_from_a_run_acts_like_its_best_actor(uninterrupted, tmp_path):
     import jax
 
