@@ -218,33 +218,49 @@ class Config:
         return dataclasses.replace(self, **changes)
 
 
-SWEEPABLE: tuple[str, ...] = (
-    "strategy",
-    "uncertainty",
-    "query_prob",
-    "t_query",
-    "demo_steps",
-    "budget",
-    "eps_demo",
-    "actor_lr",
-    "critic_lr",
-    "alpha_lr",
-    "gamma",
-    "tau",
-    "reward_scale",
-    "init_alpha",
-    "autotune_alpha",
-    "seed",
-)
+@dataclass(frozen=True)
+class Sweepable:
+    """How a sweepable Config field travels into the compiled program (one row of `SWEEPABLES`)."""
+
+    hparam: str  # the HParams field that carries it
+    dtype: Any  # its device dtype
+    encode: Any  # Config value -> number (e.g. a strategy name -> its index)
+    strategies: tuple[str, ...] | None = None  # strategies whose runs it can change (None: all)
+
+
+_QUERYING = ("greedy", "bernoulli", "active")
+_F32, _I32 = jnp.float32, jnp.int32
+SWEEPABLES: dict[str, Sweepable] = {
+    "strategy": Sweepable("strategy", _I32, STRATEGIES.index),
+    "uncertainty": Sweepable("noisy", _F32, lambda u: float(u == "extrinsic")),
+    "query_prob": Sweepable("query_prob", _F32, float, ("bernoulli",)),
+    "t_query": Sweepable("t_query", _F32, float, ("active",)),
+    "demo_steps": Sweepable("demo_steps", _I32, int, _QUERYING),
+    "budget": Sweepable("budget", _I32, int, _QUERYING),
+    "eps_demo": Sweepable("eps_demo", _F32, float, _QUERYING),
+    "actor_lr": Sweepable("actor_lr", _F32, float),
+    "critic_lr": Sweepable("critic_lr", _F32, float),
+    "alpha_lr": Sweepable("alpha_lr", _F32, float),
+    "gamma": Sweepable("gamma", _F32, float),
+    "tau": Sweepable("tau", _F32, float),
+    "reward_scale": Sweepable("reward_scale", _F32, float),
+    "init_alpha": Sweepable("init_alpha", _F32, float),
+    "autotune_alpha": Sweepable("autotune_alpha", _F32, float),
+}
+"""The one list of sweepable Config fields: the HParams field each becomes, and (pruning) which
+strategies it can change. The seed is sweepable too but travels as the PRNG key."""
+
+SWEEPABLE: tuple[str, ...] = (*SWEEPABLES, "seed")
 """Config fields that one compiled program can vmap over (values, not shapes)."""
 
 
 @flax.struct.dataclass
 class HParams:
-    """The sweepable values of one run as device arrays (a leading axis when sweeping)."""
+    """The sweepable values of one run as device arrays (a leading axis when sweeping); one field
+    per row of `SWEEPABLES` (checked below)."""
 
     strategy: jnp.ndarray  # int32, index into STRATEGIES
-    noisy: jnp.ndarray  # float32, 1.0 = Noisy SAC agent with extrinsic uncertainty
+    noisy: jnp.ndarray  # float32, 1.0 = noisy agent (Noisy SAC / Noisy TD3), extrinsic uncertainty
     query_prob: jnp.ndarray
     t_query: jnp.ndarray
     demo_steps: jnp.ndarray  # int32
@@ -260,25 +276,18 @@ class HParams:
     autotune_alpha: jnp.ndarray  # float32, 1.0 = tune alpha (eq. 18), 0.0 = fixed
 
 
+assert [f.name for f in dataclasses.fields(HParams)] == [s.hparam for s in SWEEPABLES.values()], (
+    "HParams and SWEEPABLES must list the same fields in the same order"
+)
+
+
 def hparams_from_config(cfg: Config) -> HParams:
     """The sweepable values of `cfg` as scalar arrays (the seed travels separately, as a PRNG key)."""
-    f32 = jnp.float32
     return HParams(
-        strategy=jnp.asarray(STRATEGIES.index(cfg.strategy), jnp.int32),
-        noisy=jnp.asarray(float(cfg.uncertainty == "extrinsic"), f32),
-        query_prob=jnp.asarray(cfg.query_prob, f32),
-        t_query=jnp.asarray(cfg.t_query, f32),
-        demo_steps=jnp.asarray(cfg.demo_steps, jnp.int32),
-        budget=jnp.asarray(cfg.budget, jnp.int32),
-        eps_demo=jnp.asarray(cfg.eps_demo, f32),
-        actor_lr=jnp.asarray(cfg.actor_lr, f32),
-        critic_lr=jnp.asarray(cfg.critic_lr, f32),
-        alpha_lr=jnp.asarray(cfg.alpha_lr, f32),
-        gamma=jnp.asarray(cfg.gamma, f32),
-        tau=jnp.asarray(cfg.tau, f32),
-        reward_scale=jnp.asarray(cfg.reward_scale, f32),
-        init_alpha=jnp.asarray(cfg.init_alpha, f32),
-        autotune_alpha=jnp.asarray(float(cfg.autotune_alpha), f32),
+        **{
+            s.hparam: jnp.asarray(s.encode(getattr(cfg, name)), s.dtype)
+            for name, s in SWEEPABLES.items()
+        }
     )
 
 

@@ -27,20 +27,22 @@ import jax
 import jax.numpy as jnp
 
 from arld_jax import config as config_presets
-from arld_jax.config import STRATEGIES, SWEEPABLE, Config, HParams, hparams_from_config
+from arld_jax.config import (
+    STRATEGIES,
+    SWEEPABLE,
+    SWEEPABLES,
+    Config,
+    HParams,
+    hparams_from_config,
+)
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SHIPPED_EXPERT_PATH = "experiments/expert"
 """The shipped expert, relative to the repository root (resolved by `resolve_expert_path`)."""
 SHIPPED_EXPERT = REPO_ROOT / SHIPPED_EXPERT_PATH
 
-_QUERYING = ("greedy", "bernoulli", "active")
 RELEVANT_FOR: dict[str, tuple[str, ...]] = {
-    "query_prob": ("bernoulli",),
-    "t_query": ("active",),
-    "demo_steps": _QUERYING,
-    "budget": _QUERYING,
-    "eps_demo": _QUERYING,
+    name: spec.strategies for name, spec in SWEEPABLES.items() if spec.strategies is not None
 }
 """Swept field -> the strategies whose runs it can change (pruning; every other field: all)."""
 IGNORES_UNCERTAINTY: tuple[str, ...] = ("boot_td3",)
