@@ -139,7 +139,7 @@ _THIRD_PARTY_NOISE = (
 
 
 @contextlib.contextmanager
-def _without_third_party_noise() -> Iterator[None]:
+def without_third_party_noise() -> Iterator[None]:
     """Run the block with stdout/stderr captured at the file-descriptor level (MuJoCo's C code
     writes there directly), then re-print every captured line except `_THIRD_PARTY_NOISE`; an
     exception in the block re-prints everything, so nothing that explains an error is lost."""
@@ -169,7 +169,7 @@ def _without_third_party_noise() -> Iterator[None]:
 
 
 def _brax_env(name: str, backend: str) -> Env:
-    with _without_third_party_noise():
+    with without_third_party_noise():
         # Imported lazily: the toy env and the unit tests do not need Brax.
         from brax import envs as brax_envs
 

@@ -36,7 +36,10 @@ def halfcheetah_model() -> Any:
     """The host-side MuJoCo model (built once; only kinematics are used)."""
     import mujoco
 
-    return mujoco.MjModel.from_xml_path(str(brax_halfcheetah_xml()))
+    from arld_jax.envs import without_third_party_noise
+
+    with without_third_party_noise():  # MuJoCo's 'settotalmass' deprecation for Brax's XML
+        return mujoco.MjModel.from_xml_path(str(brax_halfcheetah_xml()))
 
 
 def halfcheetah_action_names() -> list[str]:
