@@ -225,6 +225,9 @@ def write_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
 
     csv_path, md_path = results.write_summary(out)
     log(md_path.read_text())
+    comparison = results.write_comparison(out)
+    if comparison is not None:
+        log(comparison.read_text())
     if plots:
         from arld_jax import plots as plots_mod
 

@@ -418,3 +418,41 @@ def test_upside_down_late_from_visited_sample_for_old_halfcheetah_runs(tmp_path:
     expected = [np.mean(np.arange(k)[late_mask[r]] % 2 == 0) for r in range(n)]
     expected[0] = 1.0
     np.testing.assert_allclose(late, expected)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    st.lists(st.integers(-5, 5), min_size=1, max_size=6),
+    st.lists(st.integers(-5, 5), min_size=1, max_size=6),
+)
+def test_probability_of_improvement_equals_rliables(xs: list[int], ys: list[int]) -> None:
+    """Ours (vectorised, ties count half) against rliable's Mann-Whitney-based metric."""
+    from rliable import metrics as rly_metrics
+
+    x, y = np.asarray(xs, float), np.asarray(ys, float)
+    want = rly_metrics.probability_of_improvement(x[:, None], y[:, None])
+    assert results.probability_of_improvement(x, y) == pytest.approx(float(want))
+
+
+def test_pairwise_comparison_with_bootstrap_cis(tmp_path: Path) -> None:
+    """SAC, BQSAC and AQSAC cells (intrinsic) with eval_return = 100 (cell + 1)(p + 1) + 10 seed:
+    final returns are 400/800/1200 + {0, 10, 20}. AQSAC - BQSAC = 400 exactly in every resample's
+    mean (same seed offsets), and every AQSAC run beats every BQSAC run: P = 1 with CI [1, 1]."""
+    cells = [{"strategy": "none"}, {"strategy": "bernoulli"}, {"strategy": "active"}]
+    path = write_run_dir(tmp_path / "c", cells, {"strategy": ["none", "bernoulli", "active"]})
+    run = results.load_run(path)
+    names = [name for name, _, _ in results.comparison_pairs(run)]
+    assert names == ["AQSAC - BQSAC", "AQSAC - SAC"]  # one uncertainty: no intrinsic-extrinsic
+    rows = {(r["pair"], r["metric"]): r for r in results.compare(run, reps=2_000)}
+    final = rows[("AQSAC - BQSAC", "final return")]
+    assert final["diff"] == pytest.approx(400.0)
+    # Resampling the 3 seeds of each cell independently: the mean offsets range over [0, 20].
+    assert 380.0 - 1e-9 <= final["diff_lo"] <= 400.0 <= final["diff_hi"] <= 420.0 + 1e-9
+    assert final["p_improve"] == 1.0 and final["p_lo"] == 1.0 and final["p_hi"] == 1.0
+    auc = rows[("AQSAC - SAC", "AUC")]
+    assert auc["diff"] == pytest.approx(2 * 250.0)  # AUC = 100 (cell + 1) * 2.5 + 10 seed
+    md = results.write_comparison(path).read_text()
+    assert "| AQSAC - BQSAC | final return | 3 / 3 | 400 [" in md
+    # A run without pairs (no active cell) writes nothing.
+    other = write_run_dir(tmp_path / "n", NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]})
+    assert results.write_comparison(other) is None
