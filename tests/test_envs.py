@@ -59,18 +59,38 @@ def test_limited_step_runs_in_chunks():
     assert seen == [2]
 
 
-def test_building_halfcheetah_prints_no_third_party_noise():
-    """Every run used to print MuJoCo-MJX's 'Failed to import warp', Brax's maintenance notice and
-    MuJoCo's 'settotalmass' deprecation; a new process building the env prints none of them."""
-    import subprocess
-    import sys
+def test_third_party_noise_is_dropped_and_everything_else_kept(capfd):
+    """The filter works at the file-descriptor level (MuJoCo's C code writes there): known
+    third-party notices are dropped, other lines come through, and after an error everything is
+    re-printed so nothing that explains it is lost."""
+    import os
 
-    code = (
-        "from arld_jax.config import Config; from arld_jax.envs import make_env; "
-        "print('obs_dim', make_env(Config()).obs_dim)"
-    )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "obs_dim 17"
-    for noise in ("warp", "settotalmass", "not actively being maintained"):
-        assert noise not in done.stdout + done.stderr, done.stdout + done.stderr
+    from arld_jax.envs import without_third_party_noise
+
+    with without_third_party_noise():
+        os.write(1, b"Failed to import warp: No module named 'warp'\n")
+        os.write(2, b"WARNING: compiler attribute 'settotalmass' is deprecated\n")
+        os.write(1, b"a message of our own\n")
+    out, err = capfd.readouterr()
+    assert "warp" not in out + err and "settotalmass" not in out + err
+    assert "a message of our own" in out + err
+    with pytest.raises(RuntimeError), without_third_party_noise():
+        os.write(1, b"Failed to import warp: it matters now\n")
+        raise RuntimeError("boom")
+    out, err = capfd.readouterr()
+    assert "it matters now" in out + err
+
+
+def test_building_halfcheetah_prints_no_third_party_noise(capfd):
+    """Building Brax's halfcheetah printed MuJoCo's 'settotalmass' deprecation and Brax's
+    maintenance notice at every run; now neither (the MJX import's Warp message is covered by the
+    filter test above: it is printed once per process, at the first import)."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        env = make_env(Config())
+    out, err = capfd.readouterr()
+    assert env.obs_dim == 17
+    assert "settotalmass" not in out + err, out + err
+    assert not [w for w in caught if "not actively being maintained" in str(w.message)]
