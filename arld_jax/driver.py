@@ -228,6 +228,7 @@ def write_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
     comparison = results.write_comparison(out)
     if comparison is not None:
         log(comparison.read_text())
+    log(results.plain_reading(out))
     if plots:
         from arld_jax import plots as plots_mod
 

@@ -653,3 +653,93 @@ def write_comparison(run_dir: str | Path | RunDir) -> Path | None:
     path = run.path / "comparison.md"
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+# -------------------------------------------------------------------------------------------------
+# a plain-language reading of the summary (printed by the driver at the end of a run)
+# -------------------------------------------------------------------------------------------------
+
+
+def _interval(row: dict[str, Any]) -> tuple[float, float]:
+    half = row["final_return_ci95"]
+    half = half if math.isfinite(half) else 0.0
+    return row["final_return_mean"] - half, row["final_return_mean"] + half
+
+
+def _cell_text(row: dict[str, Any]) -> str:
+    lo, hi = _interval(row)
+    return f"{row['cell_label'] or 'base'}: {row['final_return_mean']:,.0f} [{lo:,.0f}, {hi:,.0f}]"
+
+
+def plain_reading(run_dir: str | Path | RunDir) -> str:
+    """A few sentences a newcomer can read instead of the table: each querying cell's final return
+    against plain SAC's (same uncertainty measure), with their 95% intervals and whether those
+    overlap; the best querying cell; the expert's return; the gait; where the figures are."""
+    run = _as_run(run_dir)
+    rows = summarize(run)
+    if not rows or run.periods == 0:
+        return "Nothing to read yet: no evaluation period has finished."
+    steps = rows[0]["env_steps"]
+    seeds = "/".join(str(n) for n in sorted({r["n_seeds"] for r in rows}))
+    lines = [
+        f"Reading (final evaluation return at {steps:,} env steps per run, mean and 95% interval "
+        f"over {seeds} seeds; intervals that do not overlap mean a difference the seeds support):"
+    ]
+
+    def field(row: dict[str, Any], name: str, default: str) -> str:
+        cell = next(c for c in group_cells(run) if c.cell == row["cell"])
+        return str(run_field(run, cell.runs[0], name, default))
+
+    plain = {
+        field(r, "uncertainty", "intrinsic"): r
+        for r in rows
+        if field(r, "strategy", "none") == "none"
+    }
+    querying = [r for r in rows if field(r, "strategy", "none") != "none"]
+    for row in querying:
+        base = plain.get(field(row, "uncertainty", "intrinsic"))
+        if base is None:
+            lines.append(f"- {_cell_text(row)}.")
+            continue
+        (lo, hi), (blo, bhi) = _interval(row), _interval(base)
+        if lo > bhi:
+            verdict = "above plain SAC, intervals apart"
+        elif hi < blo:
+            verdict = "below plain SAC, intervals apart"
+        else:
+            verdict = "not separated from plain SAC (intervals overlap)"
+        lines.append(f"- {_cell_text(row)}: {verdict} ({_cell_text(base)}).")
+    if not querying:
+        lines += [f"- {_cell_text(r)}." for r in rows]
+    if querying:
+        best = max(querying, key=lambda r: r["final_return_mean"])
+        lines.append(f"Best querying cell: {best['cell_label']}.")
+    expert = expert_return(run)
+    if math.isfinite(expert):
+        above = [r["cell_label"] for r in rows if _interval(r)[0] > expert]
+        lines.append(
+            f"The expert's return is {expert:,.0f}; "
+            + (
+                f"above it with the whole interval: {', '.join(above)}."
+                if above
+                else "no cell's interval is above it."
+            )
+        )
+    flipped = [
+        r
+        for r in rows
+        if math.isfinite(r["upside_down_late_mean"]) and r["upside_down_late_mean"] > 0.05
+    ]
+    if flipped:
+        lines.append(
+            "Upside down in more than 5% of the late states (the flipped gait): "
+            + ", ".join(
+                f"{r['cell_label'] or 'base'} ({100 * r['upside_down_late_mean']:.0f}%)"
+                for r in flipped
+            )
+            + "."
+        )
+    if run.partial:
+        lines.append("This run directory is partial: the numbers are over the periods present.")
+    lines.append(f"Table: {run.path / 'summary.md'}; figures: {run.path / 'figures'}/.")
+    return "\n".join(lines)

@@ -456,3 +456,20 @@ def test_pairwise_comparison_with_bootstrap_cis(tmp_path: Path) -> None:
     # A run without pairs (no active cell) writes nothing.
     other = write_run_dir(tmp_path / "n", NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]})
     assert results.write_comparison(other) is None
+
+
+def test_plain_reading_names_which_cells_differ(tmp_path: Path) -> None:
+    """Final returns 400/800/1200 + {0, 10, 20} (half-width 24.84): BQSAC's and AQSAC's intervals
+    lie above plain SAC's; with the seeds' spread made huge for AQSAC, it overlaps SAC instead."""
+    cells = [{"strategy": "none"}, {"strategy": "bernoulli"}, {"strategy": "active"}]
+    path = write_run_dir(tmp_path / "r", cells, {"strategy": ["none", "bernoulli", "active"]})
+    text = results.plain_reading(path)
+    assert "strategy=bernoulli: 810 [785, 835]: above plain SAC, intervals apart" in text
+    assert "strategy=active: 1,210 [1,185, 1,235]: above plain SAC" in text
+    assert "Best querying cell: strategy=active." in text
+    assert "The expert's return is 3,000; no cell's interval is above it." in text
+    m = dict(np.load(path / "metrics.npz"))
+    m["eval_return"][6:9, -1] = [0.0, 2000.0, 4000.0]  # AQSAC's seeds far apart
+    np.savez(path / "metrics.npz", **m)
+    assert "strategy=active: 2,000 [" in results.plain_reading(path)
+    assert "not separated from plain SAC (intervals overlap)" in results.plain_reading(path)
