@@ -46,10 +46,9 @@ from arld_jax.agents.base import (
     Agent,
     UpdateMetrics,
     adam_step,
-    polyak,
     reduce_over_actions,
 )
-from arld_jax.agents.td3 import explore, is_policy_step, select_tree
+from arld_jax.agents.td3 import delayed_policy_step, explore
 from arld_jax.config import Config, HParams
 from arld_jax.networks import MultiHeadActor, MultiHeadTwinCritic
 from arld_jax.types import Params, PRNGKey, Transition
@@ -185,30 +184,8 @@ def make(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
         actor_params, actor_opt = adam_step(
             state.actor_params, a_grads, state.actor_opt, hp.actor_lr
         )
-        step = state.step + 1
-        delayed = (
-            actor_params,
-            actor_opt,
-            polyak(state.target_actor_params, actor_params, hp.tau),
-            polyak(state.target_critic_params, critic_params, hp.tau),
-        )
-        kept = (
-            state.actor_params,
-            state.actor_opt,
-            state.target_actor_params,
-            state.target_critic_params,
-        )
-        actor_params, actor_opt, target_actor, target_critic = select_tree(
-            is_policy_step(step, delay), delayed, kept
-        )
-        new_state = state.replace(
-            actor_params=actor_params,
-            critic_params=critic_params,
-            target_actor_params=target_actor,
-            target_critic_params=target_critic,
-            actor_opt=actor_opt,
-            critic_opt=critic_opt,
-            step=step,
+        new_state = delayed_policy_step(
+            state, critic_params, critic_opt, actor_params, actor_opt, hp.tau, delay
         )
         zero = jnp.zeros(())
         metrics = UpdateMetrics(

@@ -77,6 +77,45 @@ def is_policy_step(step: jax.Array, delay: int) -> jax.Array:
     return step % delay == 0
 
 
+def delayed_policy_step(
+    state: Any,
+    critic_params: Params,
+    critic_opt: optax.OptState,
+    actor_params: Params,
+    actor_opt: optax.OptState,
+    tau: jax.Array,
+    delay: int,
+) -> Any:
+    """Apply one TD3 update's new parameters to `state` (TD3's or Bootstrapped TD3's: same fields):
+    the critics always; the actor and the Polyak targets of both only when the update count is a
+    multiple of `delay` (Fujimoto et al. 2018, delayed policy updates), by selects (vmap-safe)."""
+    step = state.step + 1
+    delayed = (
+        actor_params,
+        actor_opt,
+        polyak(state.target_actor_params, actor_params, tau),
+        polyak(state.target_critic_params, critic_params, tau),
+    )
+    kept = (
+        state.actor_params,
+        state.actor_opt,
+        state.target_actor_params,
+        state.target_critic_params,
+    )
+    actor_params, actor_opt, target_actor, target_critic = select_tree(
+        is_policy_step(step, delay), delayed, kept
+    )
+    return state.replace(
+        actor_params=actor_params,
+        critic_params=critic_params,
+        target_actor_params=target_actor,
+        target_critic_params=target_critic,
+        actor_opt=actor_opt,
+        critic_opt=critic_opt,
+        step=step,
+    )
+
+
 def explore(mean_action: jax.Array, key: PRNGKey, noise_std: float) -> jax.Array:
     """TD3's exploration action clip(a + N(0, sigma^2), -1, 1) (Fujimoto et al. 2018)."""
     noise = noise_std * jax.random.normal(key, mean_action.shape)
@@ -171,30 +210,8 @@ def make(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
         actor_params, actor_opt = adam_step(
             state.actor_params, a_grads, state.actor_opt, hp.actor_lr
         )
-        step = state.step + 1
-        delayed = (
-            actor_params,
-            actor_opt,
-            polyak(state.target_actor_params, actor_params, hp.tau),
-            polyak(state.target_critic_params, critic_params, hp.tau),
-        )
-        kept = (
-            state.actor_params,
-            state.actor_opt,
-            state.target_actor_params,
-            state.target_critic_params,
-        )
-        actor_params, actor_opt, target_actor, target_critic = select_tree(
-            is_policy_step(step, delay), delayed, kept
-        )
-        new_state = TD3State(
-            actor_params=actor_params,
-            critic_params=critic_params,
-            target_actor_params=target_actor,
-            target_critic_params=target_critic,
-            actor_opt=actor_opt,
-            critic_opt=critic_opt,
-            step=step,
+        new_state = delayed_policy_step(
+            state, critic_params, critic_opt, actor_params, actor_opt, hp.tau, delay
         )
         zero = jnp.zeros(())
         metrics = UpdateMetrics(
