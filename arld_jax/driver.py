@@ -72,6 +72,16 @@ def choose_chunk(num_evals: int, requested: int | None) -> int:
     return min(divisors, key=lambda d: (abs(num_evals // d - 10), d))
 
 
+@dataclasses.dataclass(frozen=True)
+class ChunkHooks:
+    """Calls around `run_sweep`'s chunk loop (a person's page follows the run through them)."""
+
+    before_compile: Callable[[int], None] = lambda env_step: None  # env steps already done
+    before_chunk: Callable[[int], None] = lambda chunk: None  # index of the chunk about to run
+    after_chunk: Callable[[int, int, Any], None] = lambda chunk, num_chunks, metrics: None
+    timing: Callable[[], dict[str, Any]] = dict  # extra entries of timing.json
+
+
 def run_sweep(
     sweep: Sweep,
     out: Path,
@@ -81,35 +91,48 @@ def run_sweep(
     preset: str = "",
     plots: bool = True,
     log=print,  # noqa: ANN001
+    expert: Any = None,
+    vmapped: bool = True,
+    hooks: ChunkHooks | None = None,
+    record: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Train every run of `sweep` into `out`, resuming from its checkpoint if there is one.
 
-    Returns {"metrics": {field: [R, periods, ...]}, "complete": bool, ...}."""
+    `expert` replaces the one `cfg.expert_path` names; `vmapped=False` trains the sweep's single
+    run without vmap (on a run axis of 1: the same files), for an expert that cannot be batched.
+    `record`: extra entries of config.json (not part of the identity compared on resume).
+    Returns {"metrics": {field: [R, periods, ...]}, "complete": bool, "state": [R, ...], ...}."""
     import jax
     import jax.numpy as jnp
     import orbax.checkpoint as ocp
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-    from arld_jax.train import jit_chunk, make_train
+    from arld_jax.train import jit_chunk, make_train, over_runs
 
     cfg = sweep.cfg
-    expert = None
-    if sweep.needs_expert():
+    hooks = hooks or ChunkHooks()
+    if not vmapped and sweep.num_runs != 1:
+        raise ValueError(f"an unbatched run_sweep trains one run, this sweep has {sweep.num_runs}")
+    if expert is None and sweep.needs_expert():
         expert = expert_for(cfg)
     trainer = make_train(cfg, expert)
-    identity = sweep.to_json() | {
-        "preset": preset,
-        "command": command,
-        "expert": expert.meta if expert is not None else None,
-        "devices": [str(d) for d in jax.devices()],
-    }
+    identity = (
+        sweep.to_json()
+        | {
+            "preset": preset,
+            "command": command,
+            "expert": expert.meta if expert is not None else None,
+            "devices": [str(d) for d in jax.devices()],
+        }
+        | (record or {})
+    )
     resumed = check_or_write_identity(out, identity)
     (out / "runs.json").write_text(json.dumps(sweep.runs(), indent=1) + "\n")
 
     # Runs axis, padded to a multiple of the device count and sharded over devices.
     hps, keys = sweep.hparams_and_keys()
     num_runs = sweep.num_runs
-    devices = jax.devices()
+    devices = jax.devices() if vmapped else jax.devices()[:1]
     padded = -(-num_runs // len(devices)) * len(devices)
     pad = lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], padded - num_runs, 0)])  # noqa: E731
     hps, keys = jax.tree.map(pad, hps), pad(keys)
@@ -119,8 +142,8 @@ def run_sweep(
 
     chunk = choose_chunk(cfg.num_evals, chunk_periods)
     num_chunks = cfg.num_evals // chunk
-    init = jax.jit(jax.vmap(trainer.init), out_shardings=sharding)
-    run_chunk = jit_chunk(trainer)
+    init = jax.jit(over_runs(trainer.init, vmapped), out_shardings=sharding)
+    run_chunk = jit_chunk(trainer, vmapped=vmapped)
 
     mngr = ocp.CheckpointManager(
         (out / CHECKPOINT_DIR).absolute(),
@@ -148,6 +171,7 @@ def run_sweep(
             f"resuming {out} after chunk {done}/{num_chunks} ({done * chunk * cfg.eval_every:,} env steps)"
         )
     (out / LAYOUT_FILE).write_text(json.dumps(layout) + "\n")  # the layout of what is saved below
+    hooks.before_compile(done * chunk * cfg.eval_every)
     compile_start = time.time()
     compiled = run_chunk.lower(state, hps, jnp.int32(0), chunk).compile()
     compile_seconds = time.time() - compile_start
@@ -159,6 +183,7 @@ def run_sweep(
     train_seconds = 0.0
     chunks_this_call = 0
     for c in range(done, num_chunks):
+        hooks.before_chunk(c)
         start = time.time()
         state, m = compiled(state, hps, jnp.int32(c * chunk))
         m = jax.tree.map(lambda x: np.asarray(x)[:num_runs], m)
@@ -179,6 +204,7 @@ def run_sweep(
             f"{rate:,.0f} env steps/s (all runs) | ETA {eta / 60:.1f} min | "
             f"eval return {latest:.1f} (mean of runs)"
         )
+        hooks.after_chunk(c, num_chunks, m)
         if stop_after_chunks is not None and chunks_this_call >= stop_after_chunks:
             break
     complete = metrics and metrics["eval_return"].shape[1] == cfg.num_evals
@@ -193,7 +219,7 @@ def run_sweep(
         ),
         "num_runs": num_runs,
         "devices": len(devices),
-    }
+    } | hooks.timing()
     if complete:
         (out / "timing.json").write_text(json.dumps(timing, indent=2) + "\n")
         write_results(out, plots, log)
@@ -384,9 +410,9 @@ def evaluate_expert(path: Path, episodes: int = 10, seed: int = 12345) -> dict[s
     random initial states, seed `seed`, not a training seed) and report the mean return with its
     95% CI, every episode's return and the share of its states upside down (`env.upside_down`)."""
     import jax
-    import jax.numpy as jnp
 
     from arld_jax.envs import make_env
+    from arld_jax.evaluate import rollout
     from arld_jax.expert import load_expert, read_expert_meta
     from arld_jax.results import mean_ci95
 
@@ -395,19 +421,10 @@ def evaluate_expert(path: Path, episodes: int = 10, seed: int = 12345) -> dict[s
     env = make_env(cfg)
     expert = load_expert(path, env.obs_dim, env.action_dim)
 
-    @jax.jit
-    def rollout(key: jax.Array) -> tuple[jax.Array, jax.Array]:
-        def step(state, _):  # noqa: ANN001, ANN202
-            flipped = env.upside_down(state.obs)
-            state = env.step(state, expert.act(expert.params, state.obs, key))
-            return state, (state.reward, flipped)
-
-        _, (rewards, flipped) = jax.lax.scan(
-            step, env.reset(key, episodes), None, length=cfg.episode_length
-        )
-        return jnp.sum(rewards, axis=0), jnp.mean(flipped, axis=0)
-
-    returns, flipped = (np.asarray(x) for x in rollout(jax.random.key(seed)))
+    key = jax.random.key(seed)
+    act = lambda obs: expert.act(expert.params, obs, key)  # noqa: E731
+    episodes_of = jax.jit(lambda k: rollout(env, act, k, episodes, cfg.episode_length))
+    returns, flipped = (np.asarray(x) for x in episodes_of(key))
     mean, ci = mean_ci95(returns)
     return {
         "path": str(path),

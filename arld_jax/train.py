@@ -58,13 +58,31 @@ def compiler_options() -> dict[str, Any]:
     return {"xla_cpu_copy_insertion_use_region_analysis": True}
 
 
-def jit_chunk(trainer: Trainer, donate: bool = True) -> Callable[..., Any]:
+def over_runs(fn: Callable[..., Any], vmapped: bool = True, in_axes: Any = 0) -> Callable:
+    """`fn` over a leading run axis: `jax.vmap(fn, in_axes)`, or with `vmapped=False` the same
+    signature on a run axis of size 1 without vmap (an expert with an ordered host callback, a
+    person at `arld_jax.human`'s page, cannot be batched, and its `lax.cond` must stay a branch)."""
+    if vmapped:
+        return jax.vmap(fn, in_axes=in_axes)
+    axes = in_axes if isinstance(in_axes, tuple) else None
+
+    def one_run(*args: Any) -> Any:
+        args = [
+            jax.tree.map(lambda x: x[0], a) if (axes is None or axes[i] == 0) else a
+            for i, a in enumerate(args)
+        ]
+        return jax.tree.map(lambda x: x[None], fn(*args))
+
+    return one_run
+
+
+def jit_chunk(trainer: Trainer, donate: bool = True, vmapped: bool = True) -> Callable[..., Any]:
     """The one jit recipe of a training chunk, for the driver, the benchmarks and the tests:
-    `chunk(states, hps, first_period, num_periods) -> (states, PeriodMetrics)` vmapped over runs
-    (states and hps batched, `first_period` not, `num_periods` static), the state donated (updated
-    in place across chunks) and `compiler_options()`."""
+    `chunk(states, hps, first_period, num_periods) -> (states, PeriodMetrics)` over runs
+    (states and hps with a run axis, `first_period` not, `num_periods` static; `over_runs`), the
+    state donated (updated in place across chunks) and `compiler_options()`."""
     return jax.jit(
-        jax.vmap(trainer.run_periods, in_axes=(0, 0, None, None)),
+        over_runs(trainer.run_periods, vmapped, in_axes=(0, 0, None, None)),
         static_argnums=3,
         donate_argnums=0 if donate else (),
         compiler_options=compiler_options(),

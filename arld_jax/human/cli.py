@@ -18,7 +18,6 @@ import hashlib
 import json
 import sys
 import threading
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -104,18 +103,6 @@ def check_single_run(cfg: Config) -> None:
         )
 
 
-def _unbatch(tree: Any) -> Any:
-    import jax
-
-    return jax.tree.map(lambda x: x[0], tree)
-
-
-def _batch(tree: Any) -> Any:
-    import jax
-
-    return jax.tree.map(lambda x: x[None], tree)
-
-
 def run_with_person(
     cfg: Config,
     out: Path,
@@ -129,123 +116,63 @@ def run_with_person(
 ) -> dict[str, Any]:
     """Train `cfg`'s run into `out` with the person at `session` as the expert; resumable.
 
-    The run directory has run.py's layout (config.json, runs.json, metrics.npz [1, periods],
-    checkpoints of the TrainState with a leading run axis of 1, summary) plus the dataset.
+    The driver is `arld_jax.driver.run_sweep` itself, unbatched (the person's ordered io_callback
+    cannot be vmapped, and the lax.cond around it must stay a branch), so the run directory is an
+    ordinary one (one run) plus the dataset; the session follows the chunks through `ChunkHooks`.
     Returns {"state": final TrainState (no run axis), "metrics", "complete", "timing"}."""
     import jax
-    import jax.numpy as jnp
-    import orbax.checkpoint as ocp
 
-    from arld_jax import rundir
-    from arld_jax.config import hparams_from_config
-    from arld_jax.driver import choose_chunk, write_results
+    from arld_jax.driver import ChunkHooks, run_sweep
     from arld_jax.human.expert import make_human_expert
     from arld_jax.sweep import Sweep
-    from arld_jax.train import compiler_options, make_train
 
     check_single_run(cfg)
-    expert = make_human_expert(session)
-    trainer = make_train(cfg, expert)
-    sweep = Sweep(cfg=cfg, seeds=(cfg.seed,))
-    identity = sweep.to_json() | {
-        "preset": preset,
-        "command": command,
-        "expert": expert.meta,
-        "mode": "human",
-        "devices": [str(d) for d in jax.devices()[:1]],
-    }
-    resumed = rundir.check_or_write_identity(out, identity)
-    (out / "runs.json").write_text(json.dumps(sweep.runs(), indent=1) + "\n")
 
-    hp, key = hparams_from_config(cfg), jax.random.key(cfg.seed)
-    chunk = choose_chunk(cfg.num_evals, chunk_periods)
-    num_chunks = cfg.num_evals // chunk
-    # One run, not vmapped: the person's ordered io_callback cannot be batched, and the
-    # lax.cond around it stays a real branch (asked only at demonstrated steps).
-    run_chunk = jax.jit(
-        trainer.run_periods,
-        static_argnums=3,
-        donate_argnums=0,
-        compiler_options=compiler_options(),
-    )
-    mngr = ocp.CheckpointManager(
-        (out / rundir.CHECKPOINT_DIR).absolute(),
-        options=ocp.CheckpointManagerOptions(max_to_keep=2, create=True),
-    )
-    t0 = time.time()
-    state = jax.jit(trainer.init)(key, hp)
-    layout = rundir.state_layout(_batch(state))
-    metrics: dict[str, np.ndarray] = {}
-    done = 0
-    if resumed and mngr.latest_step() is not None:
-        done = mngr.latest_step()
-        rundir.check_layout(out, layout, done)
-        template = _batch(state)
-        abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, rundir.to_checkpoint(template))
-        restored = mngr.restore(done, args=ocp.args.StandardRestore(abstract))
-        state = _unbatch(rundir.from_checkpoint(restored, template))
-        saved = np.load(out / rundir.METRICS_FILE)
-        metrics = {
-            k: saved[k][:, : done * chunk] for k in saved.files if not k.startswith("state_")
-        }
-        log(
-            f"resuming {out} after chunk {done}/{num_chunks} "
-            f"({done * chunk * cfg.eval_every:,} env steps); "
-            f"{len(session.dataset.records)} demonstrated steps on record"
-        )
-    (out / rundir.LAYOUT_FILE).write_text(json.dumps(layout) + "\n")
-    session.set_status("compiling", env_step=done * chunk * cfg.eval_every)
-    compile_start = time.time()
-    compiled = run_chunk.lower(state, hp, jnp.int32(0), chunk).compile()
-    compile_seconds = time.time() - compile_start
-    log(
-        f"compiled in {compile_seconds:.0f} s; {num_chunks} chunks of {chunk * cfg.eval_every:,} steps"
-    )
-
-    train_seconds, chunks_this_call = 0.0, 0
-    for c in range(done, num_chunks):
-        session.wait_while_paused()
-        session.set_status("training")
-        start = time.time()
-        state, m = compiled(state, hp, jnp.int32(c * chunk))
-        m = jax.tree.map(lambda x: np.asarray(x)[None], m)
-        train_seconds += time.time() - start
-        for k, v in dataclasses.asdict(m).items():
-            metrics[k] = np.concatenate([metrics[k], v], axis=1) if k in metrics else v
-        rundir.save_npz(out / rundir.METRICS_FILE, metrics | rundir.state_samples(_batch(state), 1))
-        mngr.save(c + 1, args=ocp.args.StandardSave(rundir.to_checkpoint(_batch(state))))
-        mngr.wait_until_finished()
-        chunks_this_call += 1
-        steps_done = (c + 1) * chunk * cfg.eval_every
-        latest = float(m.eval_return[0, -1])
+    def after_chunk(c: int, num_chunks: int, m: Any) -> None:
+        done = int(np.asarray(m.env_steps)[0, -1])
+        demos, latest = int(m.demos_used[0, -1]), float(m.eval_return[0, -1])
         session.set_status(
             "training",
-            env_step=steps_done,
-            demos_used=int(m.demos_used[0, -1]),
+            env_step=done,
+            demos_used=demos,
             eval_return=latest,
             chunk=c + 1,
             num_chunks=num_chunks,
         )
-        log(
-            f"[{c + 1}/{num_chunks}] env steps {steps_done:,}/{cfg.total_env_steps:,} | "
-            f"demonstrated {int(m.demos_used[0, -1])}/{cfg.budget} | eval return {latest:.1f}"
-        )
-        if stop_after_chunks is not None and chunks_this_call >= stop_after_chunks:
-            break
-    complete = bool(metrics) and metrics["eval_return"].shape[1] == cfg.num_evals
-    timing = {
-        "wall_seconds": time.time() - t0,
-        "train_seconds": train_seconds,
-        "compile_seconds": compile_seconds,
-        "num_runs": 1,
-        "asked": session.counts["asked"],
-        "replayed_from_dataset": session.counts["replayed"],
-    }
-    if complete:
-        (out / "timing.json").write_text(json.dumps(timing, indent=2) + "\n")
-        write_results(out, plots, log)
+        log(f"demonstrated {demos}/{cfg.budget} steps so far")
+
+    def before_chunk(c: int) -> None:
+        session.wait_while_paused()
+        session.set_status("training")
+
+    hooks = ChunkHooks(
+        before_compile=lambda env_step: session.set_status("compiling", env_step=env_step),
+        before_chunk=before_chunk,
+        after_chunk=after_chunk,
+        timing=lambda: {
+            "asked": session.counts["asked"],
+            "replayed_from_dataset": session.counts["replayed"],
+        },
+    )
+    if len(session.dataset.records):
+        log(f"{len(session.dataset.records)} demonstrated steps on record")
+    result = run_sweep(
+        Sweep(cfg=cfg, seeds=(cfg.seed,)),
+        out,
+        chunk_periods,
+        stop_after_chunks,
+        command=command,
+        preset=preset,
+        plots=plots,
+        log=log,
+        expert=make_human_expert(session),
+        vmapped=False,
+        hooks=hooks,
+        record={"mode": "human"},
+    )
+    if result["complete"]:
         session.set_status("finished")
-    return {"state": state, "metrics": metrics, "complete": complete, "timing": timing}
+    return result | {"state": jax.tree.map(lambda x: x[0], result["state"])}
 
 
 # ---------------------------------------------------------------- command line
