@@ -160,6 +160,11 @@ def build_parser() -> argparse.ArgumentParser:
             help=help_text,
             description=help_text + ". A comma list on a sweepable field sweeps it (vmapped).",
             formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+            epilog=(
+                "Without --preset: " + inspect.getdoc(SWEEP_PRESETS["default"])
+                if name == "seed_sweep"
+                else None
+            ),
         )
         p.add_argument(
             "--preset",
