@@ -553,13 +553,23 @@ def write_group_summary(group_dir: str | Path) -> tuple[Path, Path]:
 # pairwise comparison of strategies (rliable)
 # -------------------------------------------------------------------------------------------------
 
-_PAPER_NAME = {"none": "SAC", "greedy": "GQSAC", "bernoulli": "BQSAC", "active": "AQSAC"}
+_STRATEGY_PREFIX = {"none": "", "greedy": "GQ", "bernoulli": "BQ", "active": "AQ"}
+_AGENT_NAME = {"sac": "SAC", "td3": "TD3", "boot_td3": "Boot-TD3"}
+_NOISY_NAME = {"sac": "Noisy SAC", "td3": "Noisy TD3"}
+
+
+def paper_name(strategy: str, agent: str = "sac") -> str:
+    """The paper's name of a strategy for an agent family: SAC, GQSAC, BQSAC, AQSAC (section 4);
+    TD3, AQTD3, ... and Boot-TD3, AQBoot-TD3, ... for the Fig. 1 agents."""
+    return _STRATEGY_PREFIX[strategy] + _AGENT_NAME.get(agent, agent)
 
 
 def comparison_pairs(run: RunDir) -> list[tuple[str, Cell, Cell]]:
     """The comparisons the paper draws, as (name, cell a, cell b) meaning "a minus b": for each
-    uncertainty measure AQSAC vs BQSAC and AQSAC vs SAC, and for each strategy intrinsic vs
-    extrinsic. Only where exactly one cell has each (strategy, uncertainty)."""
+    uncertainty measure active vs Bernoulli and active vs none, and for each strategy intrinsic vs
+    extrinsic. Only where exactly one cell has each (strategy, uncertainty). Named after the run's
+    agent family (AQSAC - BQSAC for SAC, AQTD3 - BQTD3 for TD3)."""
+    agent = run.cfg.get("agent", "sac")
     by_key: dict[tuple[str, str], list[Cell]] = {}
     for cell in group_cells(run):
         strategy = run_field(run, cell.runs[0], "strategy", "none")
@@ -567,14 +577,15 @@ def comparison_pairs(run: RunDir) -> list[tuple[str, Cell, Cell]]:
         by_key.setdefault((strategy, uncertainty), []).append(cell)
     one = {k: v[0] for k, v in by_key.items() if len(v) == 1}
     pairs = []
-    for u, suffix in (("intrinsic", ""), ("extrinsic", " (Noisy SAC)")):
+    noisy = _NOISY_NAME.get(agent, "extrinsic")
+    for u, suffix in (("intrinsic", ""), ("extrinsic", f" ({noisy})")):
         for other in ("bernoulli", "none"):
             if ("active", u) in one and (other, u) in one:
-                name = f"AQSAC - {_PAPER_NAME[other]}{suffix}"
+                name = f"{paper_name('active', agent)} - {paper_name(other, agent)}{suffix}"
                 pairs.append((name, one[("active", u)], one[(other, u)]))
     for s in ("active", "bernoulli", "greedy", "none"):
         if (s, "intrinsic") in one and (s, "extrinsic") in one:
-            name = f"{_PAPER_NAME[s]}: intrinsic - extrinsic"
+            name = f"{paper_name(s, agent)}: intrinsic - extrinsic"
             pairs.append((name, one[(s, "intrinsic")], one[(s, "extrinsic")]))
     return pairs
 

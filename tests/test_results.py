@@ -458,6 +458,39 @@ def test_pairwise_comparison_with_bootstrap_cis(tmp_path: Path) -> None:
     assert results.write_comparison(other) is None
 
 
+def test_comparison_pairs_are_named_after_the_agent_family(tmp_path: Path) -> None:
+    """A TD3 run (Fig. 1) with both uncertainties: pairs are AQTD3 - BQTD3, ..., (Noisy TD3), and
+    the intrinsic - extrinsic pair per strategy; the cells paired are the right ones."""
+    cells = [
+        {"strategy": s, "uncertainty": u}
+        for s in ("none", "bernoulli", "active")
+        for u in ("intrinsic", "extrinsic")
+    ]
+    sweep = {"strategy": ["none", "bernoulli", "active"], "uncertainty": ["intrinsic", "extrinsic"]}
+    path = write_run_dir(tmp_path / "td3", cells, sweep)
+    cfg = json.loads((path / "config.json").read_text())
+    cfg["config"]["agent"] = "td3"
+    (path / "config.json").write_text(json.dumps(cfg))
+    run = results.load_run(path)
+    pairs = {name: (a, b) for name, a, b in results.comparison_pairs(run)}
+    assert list(pairs) == [
+        "AQTD3 - BQTD3",
+        "AQTD3 - TD3",
+        "AQTD3 - BQTD3 (Noisy TD3)",
+        "AQTD3 - TD3 (Noisy TD3)",
+        "AQTD3: intrinsic - extrinsic",
+        "BQTD3: intrinsic - extrinsic",
+        "TD3: intrinsic - extrinsic",
+    ]
+    field = lambda cell, name: results.run_field(run, cell.runs[0], name, None)  # noqa: E731
+    a, b = pairs["AQTD3 - BQTD3 (Noisy TD3)"]
+    assert (field(a, "strategy"), field(a, "uncertainty")) == ("active", "extrinsic")
+    assert (field(b, "strategy"), field(b, "uncertainty")) == ("bernoulli", "extrinsic")
+    a, b = pairs["TD3: intrinsic - extrinsic"]
+    assert (field(a, "strategy"), field(a, "uncertainty")) == ("none", "intrinsic")
+    assert (field(b, "strategy"), field(b, "uncertainty")) == ("none", "extrinsic")
+
+
 def test_plain_reading_names_which_cells_differ(tmp_path: Path) -> None:
     """Final returns 400/800/1200 + {0, 10, 20} (half-width 24.84): BQSAC's and AQSAC's intervals
     lie above plain SAC's; with the seeds' spread made huge for AQSAC, it overlaps SAC instead."""
