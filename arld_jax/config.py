@@ -34,6 +34,9 @@ AGENT_NAMES: tuple[str, ...] = ("sac", "td3", "boot_td3")
 """Agent families (`arld_jax.agents`): SAC (Noisy SAC with uncertainty 'extrinsic'), TD3 (Noisy TD3
 with 'extrinsic'; Fujimoto et al. 2018) and Bootstrapped TD3 (K heads, Osband et al. 2016). One
 compiled program per family; the paper's Fig. 1 compares the TD3 family under ARLD."""
+NOISY_AGENTS: tuple[str, ...] = ("sac", "td3")
+"""Families with a noisy variant (uncertainty 'extrinsic' = Noisy SAC / Noisy TD3, paper 3.1); the
+others have one uncertainty of their own (Bootstrapped TD3: its heads' disagreement)."""
 
 ENVS: tuple[str, ...] = ("halfcheetah", "toy")
 BACKENDS: tuple[str, ...] = ("mjx", "generalized", "positional", "spring")
@@ -94,6 +97,13 @@ class Config:
     """Upper clip of the actor's log-std head."""
     noisy_sigma_init: float = 0.017
     """Initial sigma_w, sigma_b of the Noisy SAC mean head (Fortunato et al. 2017, independent noise)."""
+    noisy_runs: bool = True
+    """Whether the compiled program may hold a noisy agent (Noisy SAC / Noisy TD3: a run with
+    uncertainty 'extrinsic'). False builds the actor's mean head without its weight-noise draws: the
+    same parameters and, since plain runs scale that noise by 0, bit-identical results, in about an
+    eighth less update time on the 2-core CPU (benchmarks/README.md, "Session 8"). Sweeps set it for their
+    program (`Sweep.program_config`: False when no run is noisy); False with uncertainty 'extrinsic'
+    is an error."""
     matmul_dtype: str = "float32"
     """Dtype of matmul inputs in the MLPs ('bfloat16' uses AMX/tensor cores; accumulation stays f32)."""
 
@@ -368,6 +378,15 @@ def validate(cfg: Config) -> None:
         _fail("log_std_min", cfg.log_std_min, f"< log_std_max ({cfg.log_std_max})")
     if not cfg.noisy_sigma_init >= 0:
         _fail("noisy_sigma_init", cfg.noisy_sigma_init, ">= 0")
+    if not isinstance(cfg.noisy_runs, bool):
+        _fail("noisy_runs", cfg.noisy_runs, "True or False")
+    if not cfg.noisy_runs and cfg.uncertainty == "extrinsic" and cfg.agent in NOISY_AGENTS:
+        _fail(
+            "noisy_runs",
+            cfg.noisy_runs,
+            f"True when uncertainty is 'extrinsic' (agent {cfg.agent!r} is then its noisy variant, "
+            "whose mean head draws weight noise)",
+        )
     for name in ("td3_policy_noise", "td3_noise_clip", "td3_exploration_noise"):
         if not getattr(cfg, name) >= 0:
             _fail(name, getattr(cfg, name), ">= 0")

@@ -115,7 +115,8 @@ def run_sweep(
         raise ValueError(f"an unbatched run_sweep trains one run, this sweep has {sweep.num_runs}")
     if expert is None and sweep.needs_expert():
         expert = expert_for(cfg)
-    trainer = make_train(cfg, expert)
+    # The program's static config: the base, without actor noise draws when no run is noisy.
+    trainer = make_train(sweep.program_config(), expert)
     identity = (
         sweep.to_json()
         | {

@@ -127,6 +127,7 @@ def load_expert(
         hidden_sizes=tuple(meta["hidden_sizes"]),
         log_std_min=meta.get("log_std_min", -20.0),
         log_std_max=meta.get("log_std_max", 2.0),
+        draw_noise=False,  # the expert acts at noise scale 0 (`expert_from_actor`)
     )
     abstract = jax.eval_shape(
         actor.init, jax.random.key(0), jnp.zeros((1, obs_dim)), jax.random.key(0), jnp.float32(0)

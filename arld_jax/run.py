@@ -200,11 +200,10 @@ def build_parser() -> argparse.ArgumentParser:
         group = p.add_argument_group("config fields (sweepable ones accept comma lists)")
         for field_name, f in FIELDS.items():
             sweepable = " [sweepable]" if field_name in SWEEPABLE else ""
+            text = f"{docs.get(field_name, '')}{sweepable} (Config default: {f.default!r})"
+            # argparse %-formats help strings, and a docstring may say "12%".
             group.add_argument(
-                f"--{field_name}",
-                default=None,
-                metavar="V",
-                help=f"{docs.get(field_name, '')}{sweepable} (Config default: {f.default!r})",
+                f"--{field_name}", default=None, metavar="V", help=text.replace("%", "%%")
             )
     plot = sub.add_parser("plot", help="(re)draw figures and summary of a run directory")
     plot.add_argument("run_dir")

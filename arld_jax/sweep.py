@@ -28,6 +28,8 @@ import jax.numpy as jnp
 
 from arld_jax import config as config_presets
 from arld_jax.config import (
+    AGENT_NAMES,
+    NOISY_AGENTS,
     STRATEGIES,
     SWEEPABLE,
     SWEEPABLES,
@@ -45,7 +47,7 @@ RELEVANT_FOR: dict[str, tuple[str, ...]] = {
     name: spec.strategies for name, spec in SWEEPABLES.items() if spec.strategies is not None
 }
 """Swept field -> the strategies whose runs it can change (pruning; every other field: all)."""
-IGNORES_UNCERTAINTY: tuple[str, ...] = ("boot_td3",)
+IGNORES_UNCERTAINTY: tuple[str, ...] = tuple(a for a in AGENT_NAMES if a not in NOISY_AGENTS)
 """Agents with one uncertainty of their own (Bootstrapped TD3: its heads' disagreement), for which a
 swept `uncertainty` changes nothing (pruned)."""
 
@@ -112,6 +114,17 @@ class Sweep:
     def run_configs(self) -> list[Config]:
         """One validated Config per run (cells x seeds, cell-major)."""
         return [self.cfg.replace(**cell, seed=seed) for cell in self.cells() for seed in self.seeds]
+
+    def program_config(self) -> Config:
+        """The Config the sweep's one compiled program is built from: the base, with `noisy_runs`
+        False when no run is a noisy agent (then no run draws actor weight noise, and the program
+        skips those draws; results are bit-identical, tested)."""
+        if self.cfg.agent not in NOISY_AGENTS or any(
+            c.uncertainty == "extrinsic" for c in self.run_configs()
+        ):
+            return self.cfg
+        # Every run is intrinsic (a base 'extrinsic' is overridden by every cell), so is the program.
+        return self.cfg.replace(noisy_runs=False, uncertainty="intrinsic")
 
     def runs(self) -> list[dict[str, Any]]:
         """The per-run records written to runs.json."""

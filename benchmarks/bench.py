@@ -75,6 +75,10 @@ CHILD_MARKER = "FIRST_STEP_RESULT "
 # HalfCheetah's sizes; the update-only and FLOP figures use them even when the env is skipped.
 HC_OBS_DIM, HC_ACTION_DIM = 17, 6
 PAPER_HIDDEN, PAPER_BATCH = (256, 256), 256
+PLAIN_SAC: dict[str, Any] = dict(noisy_runs=False)
+"""Every program benchmarked here is plain SAC, built as the driver builds a sweep without a Noisy
+SAC run (`Sweep.program_config`: no actor weight-noise draws). The update section also times the
+program that draws them (a sweep with a Noisy SAC cell)."""
 
 
 @dataclass(frozen=True)
@@ -422,7 +426,7 @@ def agent_and_inputs(
 
 def section_flops(b: Bench) -> dict:
     """FLOPs of one SAC update at B=256, 2x256 (obs 17, action 6), and the updates/s it allows."""
-    cfg = Config(hidden_sizes=PAPER_HIDDEN, batch_size=PAPER_BATCH)
+    cfg = Config(hidden_sizes=PAPER_HIDDEN, batch_size=PAPER_BATCH, **PLAIN_SAC)
     agent, state, batch, weights, hp = agent_and_inputs(cfg, HC_OBS_DIM, HC_ACTION_DIM)
     indices = jnp.arange(weights.shape[0])
     lowered = jax.jit(agent.update).lower(state, batch, weights, indices, hp, jax.random.key(1))
@@ -562,7 +566,10 @@ def update_scan(agent: Agent, num_updates: int) -> Callable[..., Any]:
 
 def updates_per_s(b: Bench, cfg: Config, obs_dim: int, action_dim: int) -> dict:
     """Update-only updates/s of `cfg`'s agent (memoized on the shapes and dtype)."""
-    memo_key = ("update", obs_dim, action_dim, cfg.hidden_sizes, cfg.batch_size, cfg.matmul_dtype)
+    memo_key = (
+        "update", obs_dim, action_dim, cfg.hidden_sizes, cfg.batch_size, cfg.matmul_dtype,
+        cfg.noisy_runs,
+    )  # fmt: skip
     if memo_key not in b.memo:
         agent, state, batch, weights, hp = agent_and_inputs(cfg, obs_dim, action_dim)
         run = update_scan(agent, b.sizes.updates)
@@ -584,11 +591,21 @@ def updates_per_s(b: Bench, cfg: Config, obs_dim: int, action_dim: int) -> dict:
 def section_update(b: Bench) -> dict:
     """Update-only rate at B=256, 2x256, obs 17, action 6: the compute ceiling of the real code."""
     out = {}
-    for dtype_name in ("float32", "bfloat16"):
-        cfg = Config(hidden_sizes=PAPER_HIDDEN, batch_size=PAPER_BATCH, matmul_dtype=dtype_name)
+    variants = {  # name -> (matmul dtype, Config.noisy_runs)
+        "float32": ("float32", False),
+        "bfloat16": ("bfloat16", False),
+        "float32, noise draws (Noisy SAC program)": ("float32", True),
+    }
+    for name, (dtype_name, noisy_runs) in variants.items():
+        cfg = Config(
+            hidden_sizes=PAPER_HIDDEN,
+            batch_size=PAPER_BATCH,
+            matmul_dtype=dtype_name,
+            noisy_runs=noisy_runs,
+        )
         r = updates_per_s(b, cfg, HC_OBS_DIM, HC_ACTION_DIM)
         limit = limit_updates_per_s(b, cfg, HC_OBS_DIM, HC_ACTION_DIM)
-        out[dtype_name] = r | {
+        out[name] = r | {
             "limit_updates_per_s": limit,
             "fraction_of_limit": r["updates_per_s"] / limit,
         }
@@ -633,6 +650,7 @@ def trainer_config(
         hidden_sizes=sizes.trainer_hidden,
         batch_size=sizes.trainer_batch,
         update_before_add=update_before_add,
+        **PLAIN_SAC,
     )
     if toy:
         fields |= dict(env_name="toy", episode_length=sizes.toy_episode_length)
@@ -1069,7 +1087,7 @@ def section_memory(b: Bench) -> dict:
         jax.eval_shape(small.init, example)
     )
     env_name = "toy" if b.args.skip_mjx else "halfcheetah"
-    cfg = Config(env_name=env_name, replay_capacity=capacity)
+    cfg = Config(env_name=env_name, replay_capacity=capacity, **PLAIN_SAC)
     trainer = make_train(cfg)
     shapes = jax.eval_shape(trainer.init, jax.random.key(0), hparams_from_config(cfg))
     parts = {name: tree_nbytes(getattr(shapes, name)) for name in shapes.__dataclass_fields__}
@@ -1385,7 +1403,7 @@ def section_peers(b: Bench) -> dict:
     limit = float("nan")
     matmul = b.report["sections"].get("matmul", {})
     if "float32_e1" in matmul:  # only when the matmul section ran in this process
-        cfg = Config(hidden_sizes=PAPER_HIDDEN, batch_size=PAPER_BATCH)
+        cfg = Config(hidden_sizes=PAPER_HIDDEN, batch_size=PAPER_BATCH, **PLAIN_SAC)
         limit = limit_updates_per_s(b, cfg, HC_OBS_DIM, HC_ACTION_DIM)
     out["limit_updates_per_s_f32"] = limit
     for num_envs in ps.env_counts:
@@ -1512,6 +1530,10 @@ def print_summary(sections: dict) -> None:
         *env_rows,
         ["update only f32, updates/s", g("update", "float32", "updates_per_s")],
         ["update only bf16, updates/s", g("update", "bfloat16", "updates_per_s")],
+        [
+            "update only f32 with noise draws, updates/s",
+            g("update", "float32, noise draws (Noisy SAC program)", "updates_per_s"),
+        ],
         ["trainer 1 env: env steps/s", g("trainer", "envs_1", "env_steps_per_s")],
         ["trainer 1 env: fraction of limit", g("trainer", "envs_1", "fraction_of_limit")],
         ["trainer 16 envs: env steps/s", g("trainer", "envs_16", "env_steps_per_s")],

@@ -43,6 +43,7 @@ INVALID: list[tuple[str, dict[str, Any]]] = [
     ("uncertainty_reduce", dict(uncertainty_reduce="foo")),
     ("log_std_min", dict(log_std_min=3.0)),  # >= log_std_max 2
     ("traces_per_eval", dict(traces_per_eval=7)),  # does not divide 250
+    ("noisy_runs", dict(uncertainty="extrinsic", noisy_runs=False)),  # Noisy SAC needs the noise
 ]
 
 

@@ -85,6 +85,19 @@ def test_noise_scale_zero_is_the_plain_linear_head(noisy_actor) -> None:  # noqa
     assert np.max(np.abs(np.asarray(out3.mean) - np.asarray(out1.mean))) > 1e-3
 
 
+def test_actor_without_noise_draws_equals_noise_scale_zero(noisy_actor) -> None:  # noqa: ANN001
+    """`draw_noise=False` (programs without a noisy run) has the same parameters and gives exactly
+    the output the noisy head gives at noise_scale 0, mean_var included."""
+    actor, params, obs = noisy_actor
+    plain = networks.Actor(action_dim=ACTION_DIM, hidden_sizes=HIDDEN, draw_noise=False)
+    same_tree = jax.eval_shape(plain.init, jax.random.key(0), obs, jax.random.key(1), 0.0)
+    assert jax.tree.structure(same_tree) == jax.tree.structure(params)
+    for scale in (0.0, 1.0):  # the plain head ignores the scale: it never draws noise
+        got = jax.jit(plain.apply)(params, obs, jax.random.key(5), jnp.float32(scale))
+        want = jax.jit(actor.apply)(params, obs, jax.random.key(5), jnp.float32(0.0))
+        jax.tree.map(np.testing.assert_array_equal, got, want)
+
+
 def test_log_std_is_clipped() -> None:
     actor = networks.Actor(action_dim=3, hidden_sizes=(4,), log_std_min=-5.0, log_std_max=1.5)
     obs = jnp.ones((2, 2))

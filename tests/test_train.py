@@ -13,6 +13,7 @@ from arld_jax import query
 from arld_jax.config import hparams_from_config, tiny
 from arld_jax.envs import toy_target_action
 from arld_jax.expert import toy_expert
+from arld_jax.sweep import Sweep
 from arld_jax.train import jit_chunk, make_train, only_if
 
 TOY_EXPERT = toy_expert()
@@ -272,3 +273,35 @@ def test_an_expert_that_hands_back_spends_no_budget_and_adds_no_demo():
     np.testing.assert_array_equal(np.flatnonzero(is_demo) % 2, 1)
     demo = is_demo == 1
     np.testing.assert_allclose(action[demo], np.asarray(toy_target_action(obs[demo])), atol=1e-6)
+
+
+@pytest.mark.parametrize("agent", ["sac", "td3"])
+def test_a_program_without_noisy_runs_skips_the_noise_bit_identically(agent):
+    """`noisy_runs=False` builds the actor without its weight-noise draws; for plain runs (noise
+    scale 0) the whole training run is bit-identical to the program that draws and zeroes them:
+    every eval return, loss, replay entry and weight. Active querying, so the uncertainty u(s) and
+    the queries it decides are in the comparison too."""
+    cfg = tiny(agent=agent, total_env_steps=600, eval_every=300, learning_starts=100,
+               strategy="active", t_query=0.3, budget=80)  # fmt: skip
+    hp = hparams_from_config(cfg)
+    out = [
+        jax.jit(make_train(c, TOY_EXPERT).train)(jax.random.key(4), hp)
+        for c in (cfg, cfg.replace(noisy_runs=False))
+    ]
+    assert int(np.asarray(out[0][0].query.demos_used)) > 0  # queries happened
+    raw = lambda x: jax.random.key_data(x) if jnp.issubdtype(x.dtype, jax.dtypes.prng_key) else x  # noqa: E731
+    jax.tree.map(lambda a, b: np.testing.assert_array_equal(raw(a), raw(b)), out[0], out[1])
+
+
+def test_sweep_program_drops_the_noise_only_when_no_run_is_noisy():
+    cfg = tiny()
+    intrinsic = Sweep(cfg=cfg, sweep={"strategy": ("none", "active")}, seeds=(0, 1))
+    assert intrinsic.program_config() == cfg.replace(noisy_runs=False)
+    both = Sweep(cfg=cfg, sweep={"uncertainty": ("intrinsic", "extrinsic")}, seeds=(0,))
+    assert both.program_config() == cfg  # one Noisy SAC run keeps the draws for the program
+    noisy_base = cfg.replace(uncertainty="extrinsic")
+    assert Sweep(cfg=noisy_base).program_config().noisy_runs
+    overridden = Sweep(cfg=noisy_base, sweep={"uncertainty": ("intrinsic",)})
+    assert overridden.program_config() == cfg.replace(noisy_runs=False)  # every run intrinsic
+    boot = cfg.replace(agent="boot_td3")
+    assert Sweep(cfg=boot).program_config() == boot  # no noisy head: nothing to drop

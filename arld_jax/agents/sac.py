@@ -53,6 +53,7 @@ def make(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
         log_std_max=cfg.log_std_max,
         sigma_init=cfg.noisy_sigma_init,
         dtype=dtype,
+        draw_noise=cfg.noisy_runs,
     )
     critic = TwinCritic(hidden_sizes=cfg.hidden_sizes, dtype=dtype)
     target_entropy = -float(action_dim)  # Haarnoja et al. 2018b: -dim(A)

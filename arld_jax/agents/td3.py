@@ -144,6 +144,7 @@ def make(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
         hidden_sizes=cfg.hidden_sizes,
         sigma_init=cfg.noisy_sigma_init,
         dtype=dtype,
+        draw_noise=cfg.noisy_runs,
     )
     critic = TwinCritic(hidden_sizes=cfg.hidden_sizes, dtype=dtype)
     delay = cfg.td3_policy_delay
