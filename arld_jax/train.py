@@ -52,10 +52,34 @@ def compiler_options() -> dict[str, Any]:
     On CPU, region-based copy insertion. Without it XLA:CPU copies buffers that nested loops update
     in place: the sum tree twice per iteration (8 seed-vmapped 1M buffers: 24-32 ms per iteration
     instead of 2), and the replay's data under `only_if` (benchmarks/README.md, "Session 5"). It
-    changes which copies are made, not what is computed. Other backends: no options."""
+    changes which copies are made, not what is computed. Other backends: no options.
+
+    Also switches JAX's CPU lowering of the threefry generator to unrolled
+    (`unroll_threefry_on_cpu`), so every program built with these options gets it."""
     if jax.default_backend() != "cpu":
         return {}
+    unroll_threefry_on_cpu()
     return {"xla_cpu_copy_insertion_use_region_analysis": True}
+
+
+def unroll_threefry_on_cpu() -> bool:
+    """Lower JAX's threefry2x32 PRNG on CPU as straight-line code, as JAX does on GPU, instead of
+    the 5-trip rolled loop it uses on CPU to save compile time. The same rounds on the same bits,
+    so every random number is unchanged (tested); the update draws at least four times (its
+    noises, the replay sample) and ran 1.08x faster with it, at the same compile time
+    (benchmarks/README.md, "Session 8"). It uses JAX internals (`jax._src.random.threefry2x32`):
+    when they are not there, nothing changes and it returns False. Idempotent; process-wide, so
+    it also applies to programs jitted later without `compiler_options`."""
+    try:
+        from jax._src.interpreters import mlir
+        from jax._src.random import threefry2x32 as threefry
+    except ImportError:
+        return False
+    rule = getattr(threefry, "_threefry2x32_lowering_rule", None)  # JAX's unrolled (GPU) rule
+    if rule is None or not hasattr(threefry, "threefry2x32_p"):
+        return False
+    mlir.register_lowering(threefry.threefry2x32_p, rule, platform="cpu")
+    return True
 
 
 def over_runs(fn: Callable[..., Any], vmapped: bool = True, in_axes: Any = 0) -> Callable:

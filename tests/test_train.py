@@ -14,7 +14,7 @@ from arld_jax.config import hparams_from_config, tiny
 from arld_jax.envs import toy_target_action
 from arld_jax.expert import toy_expert
 from arld_jax.sweep import Sweep
-from arld_jax.train import jit_chunk, make_train, only_if
+from arld_jax.train import jit_chunk, make_train, only_if, unroll_threefry_on_cpu
 
 TOY_EXPERT = toy_expert()
 SEEDS = (0, 1, 2)
@@ -305,3 +305,32 @@ def test_sweep_program_drops_the_noise_only_when_no_run_is_noisy():
     assert overridden.program_config() == cfg.replace(noisy_runs=False)  # every run intrinsic
     boot = cfg.replace(agent="boot_td3")
     assert Sweep(cfg=boot).program_config() == boot  # no noisy head: nothing to drop
+
+
+@pytest.mark.skipif(jax.default_backend() != "cpu", reason="a CPU lowering")
+def test_unrolled_threefry_on_cpu_draws_the_same_bits():
+    """`unroll_threefry_on_cpu` (on in every program built with `compiler_options`) changes how the
+    generator is lowered, not its numbers: normal, uniform and split draws are bit-equal to JAX's
+    own rolled CPU lowering, and the rolled loop is really gone."""
+    from jax._src.interpreters import mlir
+    from jax._src.random import threefry2x32 as threefry
+
+    def draws(key):
+        k1, k2 = jax.random.split(key)
+        return (jax.random.normal(k1, (257, 7)), jax.random.uniform(k2, (1000,)),
+                jax.random.key_data(jax.random.split(k2, 5)))  # fmt: skip
+
+    def lowered_and_values(key):  # a fresh function each time: a fresh lowering, not a cached one
+        fn = jax.jit(lambda k: draws(k))
+        return fn.lower(key).as_text(), fn(key)
+
+    key = jax.random.key(7)
+    rolled_rule = threefry._threefry2x32_cpu_lowering_rule
+    try:
+        mlir.register_lowering(threefry.threefry2x32_p, rolled_rule, platform="cpu")
+        rolled_text, rolled = lowered_and_values(key)
+    finally:
+        assert unroll_threefry_on_cpu()
+    unrolled_text, unrolled = lowered_and_values(key)
+    assert "stablehlo.while" in rolled_text and "stablehlo.while" not in unrolled_text
+    jax.tree.map(np.testing.assert_array_equal, rolled, unrolled)
