@@ -208,7 +208,7 @@ def _arld_cells(**extra: tuple[Any, ...]) -> dict[str, tuple[Any, ...]]:
     return cells
 
 
-def _cpu_arld_config(**overrides: Any) -> Config:
+def _cpu_arld_config() -> Config:
     """The CPU-sized ARLD protocol of the `experiment` preset (experiments/arld_cpu, sessions 1-4).
 
     A scaled-down paper protocol: MJX HalfCheetah, paper networks (2x256), batch 256, alpha 0.2,
@@ -218,7 +218,7 @@ def _cpu_arld_config(**overrides: Any) -> Config:
     deterministic returns vary little across initial states; evaluation costs as much as training
     env steps here), budget 1,500 demonstrated steps, N_r = 1,000, b = 0.1, t_query = 0.1 (the
     paper's best values), C = 5."""
-    base: dict[str, Any] = dict(
+    return Config(
         num_envs=2,
         updates_per_env_step=0.5,
         learning_starts=1_000,
@@ -233,11 +233,9 @@ def _cpu_arld_config(**overrides: Any) -> Config:
         demo_steps=5,
         expert_path=SHIPPED_EXPERT_PATH,
     )
-    base.update(overrides)
-    return Config(**base)
 
 
-def _default_config(**overrides: Any) -> Config:
+def _default_config() -> Config:
     """The default sweep's protocol: the `arld` protocol (1 env, one update per env step, SAC's
     defaults) cut to what a 2-core CPU runs in about ten minutes for 12 runs.
 
@@ -249,7 +247,7 @@ def _default_config(**overrides: Any) -> Config:
     spends 10,000 of 400k, 2.5%, with b = t_query = 0.1; a 20k-step run needs a larger share for
     the effect to show: at 10% the querying cells were not above SAC, experiments/README.md),
     N_r 1,000, C = 1 (as the `arld` preset)."""
-    base: dict[str, Any] = dict(
+    return Config(
         total_env_steps=20_000,
         replay_capacity=20_000,
         learning_starts=2_000,
@@ -262,8 +260,6 @@ def _default_config(**overrides: Any) -> Config:
         demo_steps=1,
         expert_path=SHIPPED_EXPERT_PATH,
     )
-    base.update(overrides)
-    return Config(**base)
 
 
 def preset_default() -> Sweep:
@@ -307,7 +303,7 @@ def preset_paper() -> Sweep:
     return Sweep(cfg=cfg, sweep=sweep, seeds=tuple(range(10)))
 
 
-def _arld_100k_config(**overrides: Any) -> Config:
+def _arld_100k_config() -> Config:
     """The protocol of the paper's comparison at a length this CPU can run (learning issue, part 4).
 
     The paper (A.1): 400k env steps, 1 env, one update per env step, budget 10,000 demonstrated
@@ -317,7 +313,7 @@ def _arld_100k_config(**overrides: Any) -> Config:
     episodes. Plain SAC is still below the expert at 100k (4,236 against 6,431: experiments/
     expert/), so demonstrations have room to matter. b = 0.1 for both uncertainty measures (the paper's best b
     for Noisy SAC was 0.4; one b keeps BQSAC and BQNoisySAC spending alike)."""
-    base: dict[str, Any] = dict(
+    return Config(
         total_env_steps=100_000,
         replay_capacity=100_000,
         eval_every=5_000,
@@ -329,8 +325,6 @@ def _arld_100k_config(**overrides: Any) -> Config:
         demo_steps=1,
         expert_path=SHIPPED_EXPERT_PATH,
     )
-    base.update(overrides)
-    return Config(**base)
 
 
 def preset_arld() -> Sweep:

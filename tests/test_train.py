@@ -13,6 +13,7 @@ from arld_jax import query
 from arld_jax.config import hparams_from_config, tiny
 from arld_jax.envs import toy_target_action
 from arld_jax.expert import toy_expert
+from arld_jax.rundir import is_key
 from arld_jax.sweep import Sweep
 from arld_jax.train import jit_chunk, make_train, only_if, unroll_threefry_on_cpu
 
@@ -289,7 +290,7 @@ def test_a_program_without_noisy_runs_skips_the_noise_bit_identically(agent):
         for c in (cfg, cfg.replace(noisy_runs=False))
     ]
     assert int(np.asarray(out[0][0].query.demos_used)) > 0  # queries happened
-    raw = lambda x: jax.random.key_data(x) if jnp.issubdtype(x.dtype, jax.dtypes.prng_key) else x  # noqa: E731
+    raw = lambda x: jax.random.key_data(x) if is_key(x) else x  # noqa: E731
     jax.tree.map(lambda a, b: np.testing.assert_array_equal(raw(a), raw(b)), out[0], out[1])
 
 
