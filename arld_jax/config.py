@@ -39,7 +39,7 @@ NOISY_AGENTS: tuple[str, ...] = ("sac", "td3")
 others have one uncertainty of their own (Bootstrapped TD3: its heads' disagreement)."""
 
 ENVS: tuple[str, ...] = ("halfcheetah", "toy")
-BACKENDS: tuple[str, ...] = ("mjx", "generalized", "positional", "spring")
+BACKENDS: tuple[str, ...] = ("mjx", "mujoco", "generalized", "positional", "spring")
 REDUCTIONS: tuple[str, ...] = ("mean", "max", "sum")
 WINDOW_RECORDS: tuple[str, ...] = ("all", "agent")
 MATMUL_DTYPES: tuple[str, ...] = ("float32", "bfloat16")
@@ -53,14 +53,18 @@ class Config:
     env_name: str = "halfcheetah"
     """'halfcheetah' (Brax, MuJoCo physics) or 'toy' (a cheap pure-JAX stand-in used by the tests)."""
     backend: str = "mjx"
-    """Brax physics backend for halfcheetah: 'mjx' (MuJoCo-MJX) or one of Brax's own pipelines."""
+    """Physics of halfcheetah: 'mjx' (MuJoCo-MJX through Brax, the default), 'mujoco' (MuJoCo's C
+    engine on the host through `jax.pure_callback`: Brax's same model, options, observation and
+    reward, a step many times cheaper than MJX's on CPU, for CPU runs; `envs.mujoco_halfcheetah`)
+    or one of Brax's own pipelines."""
     num_envs: int = 1
     """Environments stepped in parallel per run (vmapped). The paper uses one."""
     env_max_batch: int = 0
     """Performance only: when runs are vmapped, their runs x num_envs envs are stepped in chunks of
     at most this many, one chunk after another (`envs.limit_batch`), because MJX on CPU steps one
     batch of 80 envs at about half the total rate of five batches of 16. 0 = auto (16 on CPU, no
-    limit on GPU/TPU), -1 = no limit. The physics of each env is the same either way."""
+    limit on GPU/TPU), -1 = no limit. The physics of each env is the same either way. The 'mujoco'
+    backend is never chunked (its host loop costs the same per env at any batch)."""
     episode_length: int = 1000
     """Steps per episode (time limit). HalfCheetah never terminates, so every episode has this length."""
     total_env_steps: int = 100_000

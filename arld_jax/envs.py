@@ -1,4 +1,5 @@
-"""Batched environments: MJX HalfCheetah through Brax, and a cheap pure-JAX stand-in for tests.
+"""Batched environments: HalfCheetah through Brax (MJX physics, or MuJoCo's C engine on the host),
+and a cheap pure-JAX stand-in for tests.
 
 `make_env(cfg)` returns reset/step functions over a leading env axis. Time limits and resets are NOT
 handled here: HalfCheetah never terminates, so every episode lasts exactly `cfg.episode_length` steps
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import queue
 import sys
 import tempfile
 import warnings
@@ -62,7 +64,12 @@ CPU_ENV_MAX_BATCH = 16
 
 def make_env(cfg: Config) -> Env:
     """The batched env named by `cfg.env_name`, its vmapped step limited by `cfg.env_max_batch`."""
-    env = _brax_env("halfcheetah", cfg.backend) if cfg.env_name == "halfcheetah" else _toy_env()
+    if cfg.env_name == "toy":
+        env = _toy_env()
+    elif cfg.backend == "mujoco":
+        return mujoco_halfcheetah()  # a host loop: no chunking to tune
+    else:
+        env = _brax_env("halfcheetah", cfg.backend)
     max_batch = cfg.env_max_batch
     if max_batch == 0:  # auto: chunk on CPU only; accelerators want the widest batch
         max_batch = CPU_ENV_MAX_BATCH if jax.default_backend() == "cpu" else -1
@@ -191,6 +198,154 @@ def _brax_env(name: str, backend: str) -> Env:
         obs_dim=env.observation_size,
         action_dim=env.action_size,
         upside_down=upside_down,
+    )
+
+
+@flax.struct.dataclass
+class MujocoState:
+    """What MuJoCo's C step reads of a batch of envs, carried in the loop as float32 (as MJX's)."""
+
+    qpos: jax.Array  # [n, nq]
+    qvel: jax.Array  # [n, nv]
+    qacc_warmstart: jax.Array  # [n, nv]: the solver's warm start, part of mj_step's state
+    x: jax.Array  # [n]: the torso's x as last computed (Brax's `pipeline_state.x.pos[0, 0]`)
+
+
+class _HostPhysics:
+    """MuJoCo's C step of a batch of envs as a pure function of numpy arrays (any leading shape).
+
+    State in, state out: each call writes (qpos, qvel, warm start, ctrl) into a scratch MjData and
+    takes `n_frames` C steps, so the result depends on its arguments only, as
+    `jax.pure_callback` requires (and a checkpoint resumes bit-identically)."""
+
+    def __init__(self, model: Any, n_frames: int, torso: int) -> None:
+        self.model, self.n_frames, self.torso = model, n_frames, torso
+        self._spare: queue.SimpleQueue = queue.SimpleQueue()  # scratch MjData, one per caller
+
+    @contextlib.contextmanager
+    def _data(self) -> Iterator[Any]:
+        """A scratch MjData no other call is using: XLA may run the callbacks of programs
+        dispatched back to back on several threads at once. (A `threading.local` MjData crashed
+        the process there; a pool of spares does not: tests/test_envs.py.)"""
+        import mujoco
+
+        try:
+            data = self._spare.get_nowait()
+        except queue.Empty:
+            data = mujoco.MjData(self.model)
+        try:
+            yield data
+        finally:
+            self._spare.put(data)
+
+    def step(self, packed: Any) -> np.ndarray:
+        """[..., nq + nv + nv + nu] = (qpos, qvel, warm start, ctrl) -> [..., nq + nv + nv + 1] =
+        (qpos, qvel, warm start, torso x) after `n_frames` C steps. Packed into one array each way
+        because each argument of a host callback costs tens of microseconds."""
+        import mujoco
+
+        m = self.model
+        # The callback gets a jax.Array: take a numpy view, or every index below is a JAX dispatch.
+        packed = np.asarray(packed)
+        lead, flat = packed.shape[:-1], packed.reshape(-1, packed.shape[-1])
+        q, v, w = m.nq, m.nq + m.nv, m.nq + 2 * m.nv
+        out = np.empty((len(flat), w + 1), np.float32)
+        with self._data() as d:
+            for i, row in enumerate(flat):
+                d.qpos[:], d.qvel[:], d.qacc_warmstart[:], d.ctrl[:] = (
+                    row[:q], row[q:v], row[v:w], row[w:],
+                )  # fmt: skip
+                mujoco.mj_step(m, d, nstep=self.n_frames)
+                out[i, :q], out[i, q:v], out[i, v:w] = d.qpos, d.qvel, d.qacc_warmstart
+                out[i, w] = d.xpos[self.torso, 0]  # as of the last frame's start, as MJX's x
+        return out.reshape(*lead, w + 1)
+
+    def torso_x(self, qpos: np.ndarray) -> np.ndarray:
+        import mujoco
+
+        lead, m = qpos.shape[:-1], self.model
+        qpos = np.asarray(qpos).reshape(-1, m.nq)
+        out = np.empty(len(qpos), np.float32)
+        with self._data() as d:
+            for i in range(len(qpos)):
+                d.qpos[:] = qpos[i]
+                mujoco.mj_kinematics(m, d)
+                out[i] = d.xpos[self.torso, 0]
+        return out.reshape(lead)
+
+
+def mujoco_halfcheetah() -> Env:
+    """Brax's halfcheetah stepped by MuJoCo's C engine on the host (`Config.backend = 'mujoco'`).
+
+    The same task as the 'mjx' backend, taken from Brax's env object itself: its MjModel (MJX's
+    options: Newton solver, 4 iterations), its 5 frames per step, its reset distribution with the
+    same key splits (so the same key gives bit-identical initial states), its observation
+    (qpos[1:], qvel) and its reward ((x' - x) / dt - 0.1 |a|^2, x the torso's x as Brax reads it).
+    Only the arithmetic differs: float64 inside a C step (MJX: float32), the state rounded to float32
+    between steps; the two stay within 2e-3 of each other over 10 steps, then part as any two
+    chaotic trajectories do (tests/test_envs.py). Why: on CPU an MJX step of one env costs about as
+    much as a SAC update; a C step with its callback about 64 us (benchmarks/README.md). The loop calls
+    the host once per env step (`jax.pure_callback`, vmapped runs in one call); on a GPU that is a
+    device-host round trip per step, so there 'mjx' is the backend to use."""
+    with without_third_party_noise():
+        from brax import envs as brax_envs
+
+        brax_env = brax_envs.get_environment("halfcheetah", backend="mjx")
+    model = brax_env.sys.mj_model
+    n_frames, dt = int(brax_env._n_frames), float(brax_env.dt)
+    noise = float(brax_env._reset_noise_scale)
+    forward_weight, ctrl_weight = (
+        float(brax_env._forward_reward_weight),
+        float(brax_env._ctrl_cost_weight),
+    )
+    init_q = jnp.asarray(model.qpos0, jnp.float32)
+    host = _HostPhysics(model, n_frames, torso=model.body("torso").id)
+    nq, nv = model.nq, model.nv
+
+    def obs_of(qpos: jax.Array, qvel: jax.Array) -> jax.Array:
+        return jnp.concatenate([qpos[..., 1:], qvel], axis=-1)  # Brax: exclude the root's x
+
+    def reset_one(key: PRNGKey) -> tuple[jax.Array, jax.Array]:
+        _, k_pos, k_vel = jax.random.split(key, 3)  # Brax's Halfcheetah.reset
+        qpos = init_q + jax.random.uniform(k_pos, (nq,), minval=-noise, maxval=noise)
+        return qpos, noise * jax.random.normal(k_vel, (nv,))
+
+    def reset(key: PRNGKey, n: int) -> EnvState:
+        qpos, qvel = jax.vmap(reset_one)(jax.random.split(key, n))
+        x = jax.pure_callback(
+            host.torso_x, jax.ShapeDtypeStruct((n,), jnp.float32), qpos,
+            vmap_method="broadcast_all",
+        )  # fmt: skip
+        inner = MujocoState(qpos=qpos, qvel=qvel, qacc_warmstart=jnp.zeros_like(qvel), x=x)
+        zeros = jnp.zeros(n)
+        return EnvState(inner=inner, obs=obs_of(qpos, qvel), reward=zeros, terminated=zeros)
+
+    def step(state: EnvState, action: jax.Array) -> EnvState:
+        s = state.inner
+        packed = jnp.concatenate([s.qpos, s.qvel, s.qacc_warmstart, action], axis=-1)
+        out = jax.pure_callback(
+            host.step,
+            jax.ShapeDtypeStruct((*action.shape[:-1], nq + 2 * nv + 1), jnp.float32),
+            packed.astype(jnp.float32),
+            vmap_method="broadcast_all",
+        )
+        qpos, qvel = out[..., :nq], out[..., nq : nq + nv]
+        warm, x = out[..., nq + nv : nq + 2 * nv], out[..., -1]
+        reward = forward_weight * (x - s.x) / dt - ctrl_weight * jnp.sum(jnp.square(action), -1)
+        inner = MujocoState(qpos=qpos, qvel=qvel, qacc_warmstart=warm, x=x)
+        return EnvState(
+            inner=inner,
+            obs=obs_of(qpos, qvel),
+            reward=reward,
+            terminated=jnp.zeros_like(reward),
+        )
+
+    return Env(
+        reset=reset,
+        step=step,
+        obs_dim=nq - 1 + nv,
+        action_dim=model.nu,
+        upside_down=halfcheetah_upside_down,
     )
 
 

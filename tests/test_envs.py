@@ -1,4 +1,5 @@
-"""The env wrapper of the trainer: `limit_batch` chunks a vmapped env step without changing it."""
+"""The env wrappers of the trainer: `limit_batch` chunks a vmapped env step without changing it;
+the 'mujoco' backend is Brax's halfcheetah stepped by MuJoCo's C engine."""
 
 from __future__ import annotations
 
@@ -94,3 +95,67 @@ def test_building_halfcheetah_prints_no_third_party_noise(capfd):
     assert env.obs_dim == 17
     assert "settotalmass" not in out + err, out + err
     assert not [w for w in caught if "not actively being maintained" in str(w.message)]
+
+
+# ---------------------------------------------------------------- MuJoCo's C engine ('mujoco')
+
+
+@pytest.fixture(scope="module")
+def c_env():
+    return make_env(Config(backend="mujoco"))
+
+
+def test_mujoco_backend_is_brax_halfcheetah_in_c():
+    """Same key: bit-identical initial states to the 'mjx' backend; the same actions for 10 steps:
+    the same observations and rewards to within float32 drift (the two engines differ only in
+    their arithmetic, float64 in C against float32 in MJX; over tens more steps the chaotic
+    trajectories part). Compiles one MJX step (about a minute on CPU)."""
+    c, mjx = make_env(Config(backend="mujoco")), make_env(Config(backend="mjx"))
+    assert (c.obs_dim, c.action_dim) == (mjx.obs_dim, mjx.action_dim) == (17, 6)
+    key = jax.random.key(3)
+    sc = jax.jit(c.reset, static_argnums=1)(key, 2)
+    sm = jax.jit(mjx.reset, static_argnums=1)(key, 2)
+    np.testing.assert_array_equal(sc.obs, sm.obs)
+    step_c, step_m = jax.jit(c.step), jax.jit(mjx.step)
+    actions = jax.random.uniform(jax.random.key(4), (10, 2, 6), minval=-1.0, maxval=1.0)
+    for t in range(10):
+        sc, sm = step_c(sc, actions[t]), step_m(sm, actions[t])
+        np.testing.assert_allclose(sc.obs, sm.obs, atol=2e-3, err_msg=f"step {t}")
+        np.testing.assert_allclose(sc.reward, sm.reward, atol=2e-3, err_msg=f"step {t}")
+    assert float(jnp.max(jnp.abs(sc.obs - sm.obs))) > 0  # two engines, not one
+    assert float(jnp.max(jnp.abs(sc.obs - c.reset(key, 2).obs))) > 0.1  # it moved
+
+
+def test_mujoco_step_is_a_pure_function_of_its_state(c_env):
+    """The host step depends on its arguments only (the scratch MjData carries nothing between
+    calls): a state stepped again gives the same next state bit for bit, after other states were
+    stepped in between; vmapped over runs equals run by run; and programs dispatched back to back
+    (their callbacks may run on different threads at once) give the same result."""
+    states, actions = _states_and_actions(c_env, 3, 2)
+    step = jax.jit(jax.vmap(c_env.step))
+    first = step(states, actions)
+    for _ in range(3):  # other states through the same scratch data
+        step(first, actions)
+    again = step(states, actions)
+    for a, b in zip(jax.tree.leaves(first), jax.tree.leaves(again), strict=True):
+        np.testing.assert_array_equal(a, b)
+    one = jax.jit(c_env.step)
+    for r in range(3):
+        run_r = one(jax.tree.map(lambda x: x[r], states), actions[r])  # noqa: B023
+        np.testing.assert_array_equal(run_r.obs, first.obs[r])
+    pending = [step(states, actions) for _ in range(4)]  # not blocked on: overlapping callbacks
+    for out in pending:
+        np.testing.assert_array_equal(out.obs, first.obs)
+    assert not np.array_equal(first.obs, states.obs)
+
+
+def test_mujoco_reward_is_forward_velocity_minus_control_cost(c_env):
+    """r = (x' - x) / dt - 0.1 |a|^2 with x the torso's x: the reward of a step equals the change
+    in the carried x over Brax's dt (0.05 s) minus the control cost."""
+    state = c_env.reset(jax.random.key(5), 4)
+    action = jnp.linspace(-1.0, 1.0, 24).reshape(4, 6)
+    nxt = jax.jit(c_env.step)(state, action)
+    velocity = (nxt.inner.x - state.inner.x) / 0.05
+    expected = velocity - 0.1 * jnp.sum(action**2, axis=-1)
+    np.testing.assert_allclose(nxt.reward, expected, rtol=1e-4, atol=1e-4)
+    assert np.all(np.asarray(nxt.terminated) == 0)

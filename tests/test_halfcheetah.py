@@ -1,4 +1,5 @@
-"""The one test that compiles MuJoCo-MJX: the real env inside the scanned loop (a few minutes on CPU).
+"""The real env inside the scanned loop, with each physics backend: MuJoCo-MJX (a few minutes of
+compiling on CPU) and MuJoCo's C engine through a host callback (seconds).
 
 Checks what only the physics can show: every episode starts from a fresh random initial state (not
 Brax's AutoResetWrapper's frozen first state), the true next observation is stored at the time
@@ -17,9 +18,10 @@ from arld_jax.train import make_train
 pytestmark = pytest.mark.slow
 
 
-@pytest.fixture(scope="module")
-def cheetah_run():
+@pytest.fixture(scope="module", params=["mjx", "mujoco"])
+def cheetah_run(request):
     cfg = Config(
+        backend=request.param,
         num_envs=2,
         episode_length=40,
         total_env_steps=240,

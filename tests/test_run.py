@@ -162,6 +162,24 @@ def test_resume_after_a_stop_equals_uninterrupted(uninterrupted, tmp_path):
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
 
 
+def test_resume_with_mujoco_c_physics_equals_uninterrupted(tmp_path):
+    """The 'mujoco' backend keeps its whole physics state in the loop's carry (the host callback
+    holds none), so a stopped halfcheetah run resumes bit-identically, as MJX and the toy env do."""
+    sweep = _sweep(env_name="halfcheetah", backend="mujoco", strategy="none", total_env_steps=600,
+                   eval_every=200, learning_starts=100, episode_length=100, num_eval_episodes=1,
+                   replay_capacity=600, window_size=100)  # fmt: skip
+    quiet = dict(chunk_periods=1, plots=False, log=lambda *a: None)
+    driver.run_sweep(sweep, tmp_path / "full", **quiet)
+    first = driver.run_sweep(sweep, tmp_path / "parts", stop_after_chunks=1, **quiet)
+    assert not first["complete"]
+    assert driver.run_sweep(sweep, tmp_path / "parts", **quiet)["complete"]
+    a = np.load(tmp_path / "full" / rundir.METRICS_FILE)
+    b = np.load(tmp_path / "parts" / rundir.METRICS_FILE)
+    assert np.all(np.isfinite(a["eval_return"]))
+    for name in a.files:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+
+
 def test_checkpoint_of_another_state_layout_is_refused(uninterrupted, tmp_path):
     """A checkpoint whose TrainState layout differs (written by an older arld_jax) is not restored
     position by position into the new state: a clear error, and the saved metrics are kept."""
