@@ -493,21 +493,26 @@ def env_rollout(env: Env, num_envs: int, steps: int) -> Callable[[jax.Array], ja
     return jax.jit(rollout, compiler_options=compiler_options())
 
 
-def env_config(env_name: str, num_envs: int) -> Config:
+def env_config(env_name: str, num_envs: int, backend: str = "mjx") -> Config:
     """A valid Config with `num_envs` envs (eval_every must be a multiple of num_envs, so the
-    default Config(num_envs=16) is rejected; only env_name and num_envs matter to make_env)."""
+    default Config(num_envs=16) is rejected; only env_name, backend and num_envs matter to
+    make_env)."""
     period = 1000 * num_envs
     return Config(
-        env_name=env_name, num_envs=num_envs, eval_every=period, total_env_steps=10 * period
+        env_name=env_name,
+        backend=backend,
+        num_envs=num_envs,
+        eval_every=period,
+        total_env_steps=10 * period,
     )
 
 
-def env_steps_per_s(b: Bench, env_name: str, num_envs: int) -> dict:
-    """Env-only env steps/s of `env_name` with `num_envs` parallel envs (memoized)."""
-    memo_key = ("env", env_name, num_envs)
+def env_steps_per_s(b: Bench, env_name: str, num_envs: int, backend: str = "mjx") -> dict:
+    """Env-only env steps/s of `env_name` (physics `backend`) with `num_envs` envs (memoized)."""
+    memo_key = ("env", env_name, num_envs, backend)
     if memo_key not in b.memo:
         start = time.perf_counter()
-        env = make_env(env_config(env_name, num_envs))
+        env = make_env(env_config(env_name, num_envs, backend))
         make_env_s = time.perf_counter() - start
         rollout = env_rollout(env, num_envs, b.sizes.env_steps)
         start = time.perf_counter()
@@ -516,7 +521,7 @@ def env_steps_per_s(b: Bench, env_name: str, num_envs: int) -> dict:
         times = time_calls(lambda: rollout(jax.random.key(2)), b.sizes.repeats)
         steps = num_envs * b.sizes.env_steps
         b.memo[memo_key] = summarize(times) | {
-            "env": env_name,
+            "env": env_name if env_name == "toy" else f"{env_name} ({backend})",
             "num_envs": num_envs,
             "steps_per_call": steps,
             "make_env_s": make_env_s,
@@ -531,6 +536,9 @@ def section_env(b: Bench) -> dict:
     """Env-only throughput (random actions, no agent, no replay)."""
     env_name = "toy" if b.args.skip_mjx else "halfcheetah"
     results = {f"{env_name}_{n}": env_steps_per_s(b, env_name, n) for n in b.sizes.env_counts}
+    if env_name == "halfcheetah":  # the same env stepped by MuJoCo's C engine (Config.backend)
+        for n in b.sizes.env_counts:
+            results[f"halfcheetah-mujoco_{n}"] = env_steps_per_s(b, env_name, n, "mujoco")
     print_table(
         f"env only, random actions, {b.sizes.env_steps} scanned steps per call",
         ["env", "envs", "env steps/s", "ms/call", "compile+1st call s"],
@@ -1331,10 +1339,11 @@ def brax_run(venv: dict, num_envs: int, ps: PeerSizes) -> dict:
     }
 
 
-def arld_peer_run(b: Bench, num_envs: int, ps: PeerSizes) -> dict:
+def arld_peer_run(b: Bench, num_envs: int, ps: PeerSizes, backend: str = "mjx") -> dict:
     """arld_jax's trainer at the peers config: `trainer_config` (1 update per env step,
     learning_starts half a period) with the peers' period, sizes and eval episodes, jitted as the
-    driver does (`jit_chunk`, via `time_periods`); the median of the timed periods."""
+    driver does (`jit_chunk`, via `time_periods`); the median of the timed periods. `backend`:
+    the physics of halfcheetah ('mjx' as Brax, or 'mujoco': MuJoCo's C engine, same model)."""
     sizes = dataclasses.replace(
         b.sizes,
         period_env_steps=ps.period_env_steps,
@@ -1346,6 +1355,7 @@ def arld_peer_run(b: Bench, num_envs: int, ps: PeerSizes) -> dict:
     cfg = trainer_config(sizes, False, num_envs).replace(
         num_eval_episodes=ps.eval_episodes,
         autotune_alpha=True,  # as Brax (arld computes the alpha step either way: same work)
+        backend=backend,
     )
     trainer = make_train(cfg)
     timing = time_periods(trainer, 1, ps.timed_periods)
@@ -1353,6 +1363,7 @@ def arld_peer_run(b: Bench, num_envs: int, ps: PeerSizes) -> dict:
     out = {k: v for k, v in timing.items() if not k.startswith("_")}
     return out | {
         "env": cfg.env_name,
+        "backend": cfg.backend,
         "eval_every": cfg.eval_every,
         "num_eval_episodes": cfg.num_eval_episodes,
         "learning_starts": cfg.learning_starts,
@@ -1370,7 +1381,9 @@ def arld_peer_run(b: Bench, num_envs: int, ps: PeerSizes) -> dict:
 
 def section_peers(b: Bench) -> dict:
     """Brax's own SAC trainer (brax.training.agents.sac.train, in a separate venv with jax 0.9.2)
-    and arld_jax's trainer, side by side at the same configs on MJX HalfCheetah.
+    and arld_jax's trainer, side by side at the same configs on MJX HalfCheetah; arld_jax also with
+    the same HalfCheetah stepped by MuJoCo's C engine (`--backend mujoco`), the speed a CPU user
+    of arld_jax gets, reported beside (not instead of) the like-for-like MJX ratio.
 
     Equal work: both do 1 gradient update (batch 256, 2x256 actor and twin critics) per env step,
     evaluate every `period_env_steps` env steps with `eval_episodes` parallel 1,000-step episodes
@@ -1413,6 +1426,8 @@ def section_peers(b: Bench) -> dict:
             f"(peers, {num_envs} env(s): Brax {brax['env_steps_per_s']:.1f} env steps/s; arld_jax ...)"
         )
         arld = arld_peer_run(b, num_envs, ps)
+        log(f"(peers, {num_envs} env(s): arld_jax {arld['env_steps_per_s']:.1f}; C physics ...)")
+        arld_c = arld_peer_run(b, num_envs, ps, backend="mujoco")
         out[f"envs_{num_envs}"] = {
             "num_envs": num_envs,
             "env_steps_between_evals": ps.period_env_steps,
@@ -1426,8 +1441,17 @@ def section_peers(b: Bench) -> dict:
             / brax["without_eval_env_steps_per_s"],
             "brax_fraction_of_f32_limit": brax["env_steps_per_s"] / limit,
             "arld_fraction_of_f32_limit": arld["env_steps_per_s"] / limit,
+            # The same trainer with Brax's halfcheetah stepped by MuJoCo's C engine: the same
+            # model and task, other physics code than Brax's MJX (Config.backend = 'mujoco').
+            "arld_mujoco_env_steps_per_s": arld_c["env_steps_per_s"],
+            "ratio_arld_mujoco_over_brax": arld_c["env_steps_per_s"] / brax["env_steps_per_s"],
+            "arld_mujoco_without_eval_env_steps_per_s": arld_c["without_eval_env_steps_per_s"],
+            "ratio_arld_mujoco_without_eval": arld_c["without_eval_env_steps_per_s"]
+            / brax["without_eval_env_steps_per_s"],
+            "arld_mujoco_fraction_of_f32_limit": arld_c["env_steps_per_s"] / limit,
             "brax": brax,
             "arld": arld,
+            "arld_mujoco": arld_c,
         }
         b.save()
     rows = [
@@ -1441,13 +1465,18 @@ def section_peers(b: Bench) -> dict:
             r["arld_without_eval_env_steps_per_s"],
             r["ratio_without_eval"],
             f"{r['brax_fraction_of_f32_limit']:.2f} / {r['arld_fraction_of_f32_limit']:.2f}",
+            r["arld_mujoco_env_steps_per_s"],
+            r["ratio_arld_mujoco_over_brax"],
+            r["ratio_arld_mujoco_without_eval"],
+            f"{r['arld_mujoco_fraction_of_f32_limit']:.2f}",
         ]
         for r in out.values()
         if isinstance(r, dict) and "ratio_arld_over_brax" in r
     ]
     print_table(
         f"peers: Brax {venv['versions']['brax']} SAC (jax {venv['versions']['jax']}) vs arld_jax, "
-        "MJX HalfCheetah, 1 update per env step, B 256, 2x256",
+        "HalfCheetah, 1 update per env step, B 256, 2x256; arld on MJX as Brax, and 'C' = arld "
+        "with MuJoCo's C engine (--backend mujoco)",
         [
             "config",
             "steps/eval / episodes",
@@ -1458,6 +1487,10 @@ def section_peers(b: Bench) -> dict:
             "arld no-eval",
             "arld/brax no-eval",
             "of f32 limit brax / arld",
+            "arld C steps/s",
+            "C/brax",
+            "C/brax no-eval",
+            "C of f32 limit",
         ],
         rows,
     )
@@ -1504,9 +1537,10 @@ def print_summary(sections: dict) -> None:
     peers = sections.get("peers", {})
     peer_rows = [
         [
-            f"peers {v['num_envs']} env(s): env steps/s arld / Brax (arld/Brax)",
-            f"{v['arld_env_steps_per_s']:,.1f} / {v['brax_env_steps_per_s']:,.1f} "
-            f"({v['ratio_arld_over_brax']:.2f}x)",
+            f"peers {v['num_envs']} env(s): env steps/s arld MJX / arld C / Brax (x Brax)",
+            f"{v['arld_env_steps_per_s']:,.1f} / {v['arld_mujoco_env_steps_per_s']:,.1f} / "
+            f"{v['brax_env_steps_per_s']:,.1f} ({v['ratio_arld_over_brax']:.2f}x / "
+            f"{v['ratio_arld_mujoco_over_brax']:.2f}x)",
         ]
         for v in peers.values()
         if isinstance(v, dict) and "ratio_arld_over_brax" in v
