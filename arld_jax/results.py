@@ -25,6 +25,7 @@ import dataclasses
 import json
 import math
 import warnings
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -603,8 +604,6 @@ def compare(run_dir: str | Path | RunDir, reps: int = 20_000, seed: int = 0) -> 
     Agarwal et al. 2021): for the final and the area-under-curve return, the difference of the
     cells' means over seeds and the probability that a run of a beats a run of b. Rows: pair,
     metric, diff, diff_lo, diff_hi, p_improve, p_lo, p_hi, n_a, n_b."""
-    from rliable import library as rly
-
     run = _as_run(run_dir)
     eval_return = np.asarray(run.metrics["eval_return"], dtype=np.float64)
     values = {
@@ -612,25 +611,113 @@ def compare(run_dir: str | Path | RunDir, reps: int = 20_000, seed: int = 0) -> 
         "AUC": area_under_curve(eval_return, env_steps_axis(run)),
     }
 
-    def stats_of(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        return np.array([np.mean(x) - np.mean(y), probability_of_improvement(x[:, 0], y[:, 0])])
-
     rows = []
     for name, a, b in comparison_pairs(run):
         for metric, v in values.items():
-            x, y = v[a.runs][:, None], v[b.runs][:, None]  # [runs, 1 task]
-            with warnings.catch_warnings():  # arch's notice about rliable's RandomState argument
-                warnings.simplefilter("ignore", FutureWarning)
-                point, interval = rly.get_interval_estimates(
-                    {name: (x, y)}, stats_of, reps=reps, random_state=np.random.RandomState(seed)
-                )
-            (diff, p), ((diff_lo, p_lo), (diff_hi, p_hi)) = point[name], interval[name]
             rows.append(
-                dict(pair=name, metric=metric, diff=float(diff), diff_lo=float(diff_lo),
-                     diff_hi=float(diff_hi), p_improve=float(p), p_lo=float(p_lo),
-                     p_hi=float(p_hi), n_a=len(a.runs), n_b=len(b.runs))
-            )  # fmt: skip
+                dict(pair=name, metric=metric)
+                | bootstrap_difference(v[a.runs], v[b.runs], reps, seed)
+            )
     return rows
+
+
+def bootstrap_difference(x: np.ndarray, y: np.ndarray, reps: int, seed: int) -> dict[str, Any]:
+    """mean(x) - mean(y) and P(a run of x > a run of y), each with its 95% stratified-bootstrap CI
+    (rliable, Agarwal et al. 2021; x and y resampled separately, `reps` times, numpy seed `seed`).
+    Keys: diff, diff_lo, diff_hi, p_improve, p_lo, p_hi, n_a, n_b."""
+    from rliable import library as rly
+
+    def stats_of(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.array([np.mean(a) - np.mean(b), probability_of_improvement(a[:, 0], b[:, 0])])
+
+    x = np.asarray(x, np.float64)[:, None]  # [runs, 1 task]
+    y = np.asarray(y, np.float64)[:, None]
+    with warnings.catch_warnings():  # arch's notice about rliable's RandomState argument
+        warnings.simplefilter("ignore", FutureWarning)
+        point, interval = rly.get_interval_estimates(
+            {"x": (x, y)}, stats_of, reps=reps, random_state=np.random.RandomState(seed)
+        )
+    (diff, p), ((diff_lo, p_lo), (diff_hi, p_hi)) = point["x"], interval["x"]
+    return dict(diff=float(diff), diff_lo=float(diff_lo), diff_hi=float(diff_hi),
+                p_improve=float(p), p_lo=float(p_lo), p_hi=float(p_hi), n_a=len(x), n_b=len(y))  # fmt: skip
+
+
+def compare_runs(
+    dir_a: str | Path | RunDir,
+    dir_b: str | Path | RunDir,
+    at_steps: Sequence[int] = (),
+    reps: int = 20_000,
+    seed: int = 0,
+) -> list[dict[str, Any]]:
+    """Cells of two run directories compared as `compare` compares cells of one: a − b of the mean
+    return over seeds and P(a > b), with 95% stratified-bootstrap CIs (`bootstrap_difference`).
+
+    Pairs: cells with the same label in both, or the only cell of each when each has one. Metrics:
+    the return at each of `at_steps` env steps, at the last evaluation both have ("final return"),
+    and the AUC over the evaluations both have. Raises ValueError, naming both, when the
+    directories evaluate at different steps, share no cell, or miss a step of `at_steps`.
+    Rows: pair, metric, env_steps and the keys of `bootstrap_difference`."""
+    a, b = _as_run(dir_a), _as_run(dir_b)
+    every_a, every_b = a.cfg.get("eval_every"), b.cfg.get("eval_every")
+    if every_a != every_b:
+        raise ValueError(
+            f"{a.path} evaluates every {every_a} env steps and {b.path} every {every_b}: "
+            "their curves cannot be compared point by point"
+        )
+    periods = min(a.periods, b.periods)
+    if periods == 0:
+        raise ValueError(f"{a.path if a.periods == 0 else b.path} has no evaluation yet")
+    steps = env_steps_axis(a)[:periods]
+    cells_a, cells_b = group_cells(a), group_cells(b)
+    if len(cells_a) == len(cells_b) == 1:
+        pairs = [(cells_a[0], cells_b[0])]
+    else:
+        by_label = {c.cell_label: c for c in cells_b}
+        pairs = [(c, by_label[c.cell_label]) for c in cells_a if c.cell_label in by_label]
+    if not pairs:
+        raise ValueError(
+            f"no cell label is in both {a.path} ({[c.cell_label for c in cells_a]}) and "
+            f"{b.path} ({[c.cell_label for c in cells_b]})"
+        )
+    ret_a = np.asarray(a.metrics["eval_return"], np.float64)[:, :periods]
+    ret_b = np.asarray(b.metrics["eval_return"], np.float64)[:, :periods]
+    metrics: list[tuple[str, int, Callable[[np.ndarray], np.ndarray]]] = []
+    for at in at_steps:
+        hits = np.flatnonzero(steps == at)
+        if len(hits) == 0:
+            raise ValueError(
+                f"no evaluation at {at:,} env steps in both runs: they share evaluations at "
+                f"{int(steps[0]):,}, {int(steps[1] if len(steps) > 1 else steps[0]):,}, ..., "
+                f"{int(steps[-1]):,}"
+            )
+        metrics.append((f"return at {at:,}", at, lambda r, i=int(hits[0]): r[:, i]))
+    metrics.append(("final return", int(steps[-1]), lambda r: r[:, -1]))
+    metrics.append(("AUC", int(steps[-1]), lambda r: area_under_curve(r, steps)))
+    rows = []
+    for ca, cb in pairs:
+        name = f"{a.path.name}:{ca.cell_label or 'base'} − {b.path.name}:{cb.cell_label or 'base'}"
+        for metric, at, value in metrics:
+            x, y = value(ret_a[ca.runs]), value(ret_b[cb.runs])
+            rows.append(
+                dict(pair=name, metric=metric, env_steps=at)
+                | bootstrap_difference(x, y, reps, seed)
+            )
+    return rows
+
+
+def format_comparison(rows: list[dict[str, Any]]) -> str:
+    """A markdown table of `compare_runs` rows."""
+    lines = [
+        "| a − b | metric | seeds | difference [95% CI] | P(a > b) [95% CI] |",
+        "|---|---|---:|---:|---:|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['pair']} | {r['metric']} | {r['n_a']} / {r['n_b']} | "
+            f"{r['diff']:,.0f} [{r['diff_lo']:,.0f}, {r['diff_hi']:,.0f}] | "
+            f"{r['p_improve']:.2f} [{r['p_lo']:.2f}, {r['p_hi']:.2f}] |"
+        )
+    return "\n".join(lines)
 
 
 def write_comparison(run_dir: str | Path | RunDir) -> Path | None:
@@ -652,15 +739,8 @@ def write_comparison(run_dir: str | Path | RunDir) -> Path | None:
         f"separates the two. At the last evaluation present: {int(env_steps_axis(run)[-1]):,} "
         "env steps." + (" **Partial run directory.**" if run.partial else ""),
         "",
-        "| a − b | metric | seeds | difference [95% CI] | P(a > b) [95% CI] |",
-        "|---|---|---:|---:|---:|",
+        format_comparison(rows),
     ]
-    for r in rows:
-        lines.append(
-            f"| {r['pair']} | {r['metric']} | {r['n_a']} / {r['n_b']} | "
-            f"{r['diff']:.0f} [{r['diff_lo']:.0f}, {r['diff_hi']:.0f}] | "
-            f"{r['p_improve']:.2f} [{r['p_lo']:.2f}, {r['p_hi']:.2f}] |"
-        )
     path = run.path / "comparison.md"
     path.write_text("\n".join(lines) + "\n")
     return path

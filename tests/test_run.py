@@ -261,6 +261,51 @@ def test_results_files(uninterrupted):
     assert "±" in (full / "summary.md").read_text()
 
 
+def test_compare_two_run_directories(uninterrupted, tmp_path, capsys):
+    """`compare A B`: cells paired by label; a - b is the difference of the cells' mean returns
+    (checked against the metrics), a run against itself by exactly 0 with P(a > b) = 0.5;
+    steps that are not evaluated in both and different evaluation schedules are clear errors."""
+    _, full = uninterrupted
+    other = tmp_path / "other"
+    sweep = _sweep(strategy="none,active", seeds="2,3")
+    driver.run_sweep(sweep, other, chunk_periods=4, plots=False, log=lambda *a: None)
+    rows = results.compare_runs(full, other, at_steps=[1000])
+    assert {r["pair"].split(" − ")[0].split(":")[1] for r in rows} == {
+        "strategy=none",
+        "strategy=active",
+    }
+    assert [r["metric"] for r in rows[:3]] == ["return at 1,000", "final return", "AUC"]
+    a, b = np.load(full / rundir.METRICS_FILE), np.load(other / rundir.METRICS_FILE)
+    runs_a = [i for i, r in enumerate(json.loads((full / "runs.json").read_text()))
+              if r["cell_label"] == "strategy=active"]  # fmt: skip
+    runs_b = [i for i, r in enumerate(json.loads((other / "runs.json").read_text()))
+              if r["cell_label"] == "strategy=active"]  # fmt: skip
+    final = next(r for r in rows if "active" in r["pair"] and r["metric"] == "final return")
+    want = a["eval_return"][runs_a, -1].mean() - b["eval_return"][runs_b, -1].mean()
+    assert final["diff"] == pytest.approx(want, abs=1e-5)
+    assert final["diff_lo"] <= final["diff"] <= final["diff_hi"]
+    at_1000 = next(r for r in rows if "active" in r["pair"] and r["metric"] == "return at 1,000")
+    want = a["eval_return"][runs_a, 1].mean() - b["eval_return"][runs_b, 1].mean()
+    assert at_1000["diff"] == pytest.approx(want, abs=1e-5)  # eval_every 500: the 2nd evaluation
+    for r in results.compare_runs(full, full):
+        assert (r["diff"], r["p_improve"]) == (0.0, 0.5)  # a and b resampled apart: CI spans 0
+        assert r["diff_lo"] <= 0.0 <= r["diff_hi"] and r["p_lo"] <= 0.5 <= r["p_hi"]
+    with pytest.raises(ValueError, match="no evaluation at 1,234 env steps"):
+        results.compare_runs(full, other, at_steps=[1234])
+    run.main(["compare", str(full), str(other), "--at", "1000", "--out", str(tmp_path / "c.md")])
+    assert "return at 1,000" in capsys.readouterr().out
+    assert "| a − b |" in (tmp_path / "c.md").read_text()
+    with pytest.raises(SystemExit, match="comma list of env steps"):
+        run.main(["compare", str(full), str(other), "--at", "lots"])
+    with pytest.raises(SystemExit, match="not a run directory"):
+        run.main(["compare", str(full), str(tmp_path)])
+    slower = tmp_path / "slower"
+    driver.run_sweep(_sweep(strategy="none", eval_every=1000), slower, chunk_periods=2,
+                     plots=False, log=lambda *a: None)  # fmt: skip
+    with pytest.raises(ValueError, match="evaluates every 500 env steps"):
+        results.compare_runs(full, slower)
+
+
 def test_needs_expert_for_halfcheetah_queries(tmp_path):
     base = preset_tiny()
     cfg = base.cfg.replace(env_name="halfcheetah", expert_path=str(tmp_path / "nothing"))
