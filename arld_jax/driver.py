@@ -406,10 +406,13 @@ def write_group_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
         log(f"figure: {plots_mod.plot_group(out)}")
 
 
-def evaluate_expert(path: Path, episodes: int = 10, seed: int = 12345) -> dict[str, Any]:
+def evaluate_expert(
+    path: Path, episodes: int = 10, seed: int = 12345, backend: str | None = None
+) -> dict[str, Any]:
     """Roll out the saved expert at `path` deterministically for `episodes` fresh episodes (new
     random initial states, seed `seed`, not a training seed) and report the mean return with its
-    95% CI, every episode's return and the share of its states upside down (`env.upside_down`)."""
+    95% CI, every episode's return and the share of its states upside down (`env.upside_down`).
+    `backend`: the physics to roll out in (`Config.backend`); None = the one it was trained in."""
     import jax
 
     from arld_jax.envs import make_env
@@ -418,7 +421,7 @@ def evaluate_expert(path: Path, episodes: int = 10, seed: int = 12345) -> dict[s
     from arld_jax.results import mean_ci95
 
     meta = read_expert_meta(path)
-    cfg = Config(env_name=meta["env_name"], backend=meta.get("backend", "mjx"))
+    cfg = Config(env_name=meta["env_name"], backend=backend or meta.get("backend", "mjx"))
     env = make_env(cfg)
     expert = load_expert(path, env.obs_dim, env.action_dim)
 
@@ -429,6 +432,7 @@ def evaluate_expert(path: Path, episodes: int = 10, seed: int = 12345) -> dict[s
     mean, ci = mean_ci95(returns)
     return {
         "path": str(path),
+        "backend": cfg.backend,
         "episodes": episodes,
         "seed": seed,
         "return_mean": mean,

@@ -27,7 +27,7 @@ from typing import Any
 
 from arld_jax import config as config_mod
 from arld_jax import driver
-from arld_jax.config import SWEEPABLE, Config
+from arld_jax.config import BACKENDS, SWEEPABLE, Config
 from arld_jax.rundir import CONFIG_FILE, GROUP_FILE
 from arld_jax.sweep import (
     REPO_ROOT,
@@ -230,6 +230,12 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("expert_dir", nargs="?", default=str(SHIPPED_EXPERT))
     check.add_argument("--episodes", type=int, default=10)
     check.add_argument("--seed", type=int, default=12345, help="of the initial states")
+    check.add_argument(
+        "--backend",
+        default=None,
+        choices=BACKENDS,
+        help="physics to roll out in (default: the one the expert was trained in)",
+    )
     export.add_argument("--out", default=None, help=f"expert directory (default {SHIPPED_EXPERT})")
     return parser
 
@@ -323,12 +329,14 @@ def main(argv: list[str] | None = None) -> None:
         if args.episodes < 2:
             raise SystemExit(f"error: --episodes {args.episodes}: at least 2 (for a CI)")
         try:
-            r = driver.evaluate_expert(Path(args.expert_dir), args.episodes, args.seed)
+            r = driver.evaluate_expert(
+                Path(args.expert_dir), args.episodes, args.seed, args.backend
+            )
         except (FileNotFoundError, ValueError) as err:
             raise SystemExit(f"error: {err}") from None
         print(json.dumps(r, indent=1))
         print(
-            f"expert {r['path']}: deterministic return {r['return_mean']:.1f} ± "
+            f"expert {r['path']} ({r['backend']}): deterministic return {r['return_mean']:.1f} ± "
             f"{r['return_ci95']:.1f} (95% CI, {r['episodes']} fresh episodes), "
             f"{100 * r['upside_down']:.1f}% of states upside down"
         )

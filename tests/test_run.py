@@ -363,6 +363,18 @@ def test_evaluate_expert_rolls_out_fresh_episodes(uninterrupted, tmp_path):
         run.main(["evaluate_expert", str(tmp_path / "expert"), "--episodes", "1"])
 
 
+def test_shipped_expert_runs_as_well_in_mujoco_c_physics(capsys):
+    """`evaluate_expert --backend mujoco`: the shipped expert, trained in MJX, keeps its upright
+    running gait when MuJoCo's C engine steps the same model (it is the same task), and the report
+    names the physics it ran in."""
+    run.main(["evaluate_expert", str(run.SHIPPED_EXPERT), "--episodes", "2", "--backend", "mujoco"])
+    out = capsys.readouterr().out
+    report = json.loads(out[: out.rindex("}") + 1])
+    assert report["backend"] == "mujoco" and len(report["returns"]) == 2
+    assert min(report["returns"]) > 5_000 and report["upside_down"] == 0.0
+    assert "(mujoco): deterministic return" in out
+
+
 def test_export_expert_from_a_run_acts_like_its_best_actor(uninterrupted, tmp_path):
     import jax
 
