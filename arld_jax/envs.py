@@ -292,6 +292,8 @@ def mujoco_halfcheetah() -> Env:
 
         brax_env = brax_envs.get_environment("halfcheetah", backend="mjx")
     model = brax_env.sys.mj_model
+    # Brax's Halfcheetah keeps its constants in private attributes (brax 0.14.2, pinned): read,
+    # not copied, so both backends keep one definition of the task.
     n_frames, dt = int(brax_env._n_frames), float(brax_env.dt)
     noise = float(brax_env._reset_noise_scale)
     forward_weight, ctrl_weight = (
