@@ -285,6 +285,12 @@ def _default_out(command: str, preset: str) -> Path:
     return REPO_ROOT / "runs" / f"{command}-{preset}-{stamp}"
 
 
+def require_run_dir(path: Path) -> None:
+    """Exit with a clear error unless `path` holds a run (its config.json)."""
+    if not (path / CONFIG_FILE).exists():
+        raise SystemExit(f"error: {path} is not a run directory (no {CONFIG_FILE})")
+
+
 def compare_command(args: argparse.Namespace) -> None:
     """`compare A B [--at STEPS] [--out FILE]`: print (and write) `results.compare_runs`."""
     from arld_jax import results
@@ -295,8 +301,7 @@ def compare_command(args: argparse.Namespace) -> None:
         msg = f"error: --at {args.at!r}: a comma list of env steps, e.g. 100000,200000"
         raise SystemExit(msg) from None
     for d in (args.run_dir_a, args.run_dir_b):
-        if not (Path(d) / CONFIG_FILE).exists():
-            raise SystemExit(f"error: {d} is not a run directory (no {CONFIG_FILE})")
+        require_run_dir(Path(d))
     try:
         rows = results.compare_runs(args.run_dir_a, args.run_dir_b, at)
     except ValueError as err:
@@ -349,8 +354,7 @@ def main(argv: list[str] | None = None) -> None:
         if (run_dir / GROUP_FILE).exists():
             driver.write_group_results(run_dir, True, print)
             return
-        if not (run_dir / CONFIG_FILE).exists():
-            raise SystemExit(f"error: {run_dir} is not a run directory (no {CONFIG_FILE})")
+        require_run_dir(run_dir)
         driver.write_results(run_dir, True, print)
         return
     driver.enable_compilation_cache()
