@@ -567,7 +567,8 @@ def paper_name(strategy: str, agent: str = "sac") -> str:
 
 def comparison_pairs(run: RunDir) -> list[tuple[str, Cell, Cell]]:
     """The comparisons the paper draws, as (name, cell a, cell b) meaning "a minus b": for each
-    uncertainty measure active vs Bernoulli and active vs none, and for each strategy intrinsic vs
+    uncertainty measure active vs Bernoulli, greedy and none (the passive strategies and no
+    demonstrations that Fig. 1 says ARLD can fall behind), and for each strategy intrinsic vs
     extrinsic. Only where exactly one cell has each (strategy, uncertainty). Named after the run's
     agent family (AQSAC - BQSAC for SAC, AQTD3 - BQTD3 for TD3)."""
     agent = run.cfg.get("agent", "sac")
@@ -580,7 +581,7 @@ def comparison_pairs(run: RunDir) -> list[tuple[str, Cell, Cell]]:
     pairs = []
     noisy = _NOISY_NAME.get(agent, "extrinsic")
     for u, suffix in (("intrinsic", ""), ("extrinsic", f" ({noisy})")):
-        for other in ("bernoulli", "none"):
+        for other in ("bernoulli", "greedy", "none"):
             if ("active", u) in one and (other, u) in one:
                 name = f"{paper_name('active', agent)} - {paper_name(other, agent)}{suffix}"
                 pairs.append((name, one[("active", u)], one[(other, u)]))
@@ -632,11 +633,19 @@ def bootstrap_difference(x: np.ndarray, y: np.ndarray, reps: int, seed: int) -> 
 
     x = np.asarray(x, np.float64)[:, None]  # [runs, 1 task]
     y = np.asarray(y, np.float64)[:, None]
-    with warnings.catch_warnings():  # arch's notice about rliable's RandomState argument
-        warnings.simplefilter("ignore", FutureWarning)
-        point, interval = rly.get_interval_estimates(
-            {"x": (x, y)}, stats_of, reps=reps, random_state=np.random.RandomState(seed)
-        )
+    # rliable 1.2's StratifiedIndependentBootstrap draws its indices from numpy's *global* RNG
+    # (`np.random.choice`), ignoring `random_state`: seed the global RNG for the call and put its
+    # state back, so the same seed gives the same interval.
+    global_state = np.random.get_state()
+    np.random.seed(seed)
+    try:
+        with warnings.catch_warnings():  # arch's notice about rliable's RandomState argument
+            warnings.simplefilter("ignore", FutureWarning)
+            point, interval = rly.get_interval_estimates(
+                {"x": (x, y)}, stats_of, reps=reps, random_state=np.random.RandomState(seed)
+            )
+    finally:
+        np.random.set_state(global_state)
     (diff, p), ((diff_lo, p_lo), (diff_hi, p_hi)) = point["x"], interval["x"]
     return dict(diff=float(diff), diff_lo=float(diff_lo), diff_hi=float(diff_hi),
                 p_improve=float(p), p_lo=float(p_lo), p_hi=float(p_hi), n_a=len(x), n_b=len(y))  # fmt: skip

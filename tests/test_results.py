@@ -458,6 +458,36 @@ def test_pairwise_comparison_with_bootstrap_cis(tmp_path: Path) -> None:
     assert results.write_comparison(other) is None
 
 
+def test_bootstrap_difference_is_reproducible_and_leaves_global_rng_alone() -> None:
+    """The same seed gives the same interval (rliable 1.2 draws from numpy's global RNG, which
+    `bootstrap_difference` seeds and restores), another seed another one, and the caller's
+    global numpy RNG stream is as if the call had not happened."""
+    x, y = np.array([1.0, 5, 3, 8, 2]), np.array([0.0, 4, 1, 2, 6])
+    np.random.seed(123)
+    want_next = np.random.random_sample()
+    np.random.seed(123)
+    a = results.bootstrap_difference(x, y, reps=500, seed=0)
+    assert np.random.random_sample() == want_next
+    b = results.bootstrap_difference(x, y, reps=500, seed=0)
+    c = results.bootstrap_difference(x, y, reps=500, seed=1)
+    assert (a["diff_lo"], a["diff_hi"]) == (b["diff_lo"], b["diff_hi"])
+    assert (a["diff_lo"], a["diff_hi"], a["p_lo"]) != (c["diff_lo"], c["diff_hi"], c["p_lo"])
+
+
+def test_comparison_pairs_include_active_against_greedy(tmp_path: Path) -> None:
+    """With a greedy cell, active is also compared with greedy (the paper's Fig. 1 names greedy
+    among the passive strategies ARLD can fall behind), and the pair holds the right cells."""
+    strategies = ["none", "greedy", "bernoulli", "active"]
+    path = write_run_dir(tmp_path / "g", [{"strategy": s} for s in strategies],
+                         {"strategy": strategies})  # fmt: skip
+    run = results.load_run(path)
+    pairs = {name: (a, b) for name, a, b in results.comparison_pairs(run)}
+    assert list(pairs) == ["AQSAC - BQSAC", "AQSAC - GQSAC", "AQSAC - SAC"]
+    a, b = pairs["AQSAC - GQSAC"]
+    field = lambda cell: results.run_field(run, cell.runs[0], "strategy", None)  # noqa: E731
+    assert (field(a), field(b)) == ("active", "greedy")
+
+
 def test_comparison_pairs_are_named_after_the_agent_family(tmp_path: Path) -> None:
     """A TD3 run (Fig. 1) with both uncertainties: pairs are AQTD3 - BQTD3, ..., (Noisy TD3), and
     the intrinsic - extrinsic pair per strategy; the cells paired are the right ones."""
