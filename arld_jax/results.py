@@ -635,7 +635,8 @@ def bootstrap_difference(x: np.ndarray, y: np.ndarray, reps: int, seed: int) -> 
     y = np.asarray(y, np.float64)[:, None]
     # rliable 1.2's StratifiedIndependentBootstrap draws its indices from numpy's *global* RNG
     # (`np.random.choice`), ignoring `random_state`: seed the global RNG for the call and put its
-    # state back, so the same seed gives the same interval.
+    # state back, so the same seed gives the same interval. `random_state` is still passed for a
+    # rliable that honours it.
     global_state = np.random.get_state()
     np.random.seed(seed)
     try:
