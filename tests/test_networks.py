@@ -129,6 +129,49 @@ def test_twin_critic_has_two_independent_critics() -> None:
         )
 
 
+def test_head_matmul_is_x_at_w_with_the_same_gradients() -> None:
+    """`head_matmul` computes x @ w; only its weight gradient takes another route (a written-out
+    x^T), which must give x^T g up to float32 round-off, for any leading axes and under vmap."""
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(3, 5, 4)).astype(np.float32)
+    w = rng.normal(size=(4, 6)).astype(np.float32)
+    np.testing.assert_allclose(
+        networks.head_matmul(x, w), x.astype(np.float64) @ w, rtol=1e-5, atol=1e-5
+    )
+
+    def loss(matmul, x, w):  # noqa: ANN001, ANN202
+        return jnp.sum(jnp.sin(matmul(x, w)))
+
+    got = jax.jit(jax.grad(lambda x, w: loss(networks.head_matmul, x, w), (0, 1)))(x, w)
+    # Float64 reference: g = cos(x w); d/dx = g w^T, d/dw = sum over the leading axes of x^T g.
+    x64, w64 = x.astype(np.float64), w.astype(np.float64)
+    g = np.cos(x64 @ w64)
+    np.testing.assert_allclose(got[0], g @ w64.T, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(got[1], np.einsum("abi,abo->io", x64, g), rtol=1e-5, atol=1e-5)
+    per_row = jax.vmap(jax.grad(lambda x, w: loss(networks.head_matmul, x, w), 1), (0, None))(x, w)
+    np.testing.assert_allclose(per_row, np.einsum("abi,abo->aio", x64, g), rtol=1e-5, atol=1e-5)
+
+
+def test_actor_gradients_match_plain_matmul_heads(noisy_actor, monkeypatch) -> None:  # noqa: ANN001
+    """Every actor parameter's gradient (noisy mean head drawn, log-std head) is the one plain
+    `x @ w` heads give, to float32 round-off."""
+    actor, params, _ = noisy_actor
+    obs = jnp.asarray(np.random.default_rng(1).normal(size=(16, OBS_DIM)), jnp.float32)
+
+    def loss(params):  # noqa: ANN001, ANN202
+        out = actor.apply(params, obs, jax.random.key(3), jnp.float32(1.0))
+        return jnp.sum(jnp.tanh(out.mean) * jnp.exp(out.log_std)) + jnp.sum(out.mean_var)
+
+    got = jax.grad(loss)(params)
+    monkeypatch.setattr(networks, "head_matmul", lambda x, w: x @ w)
+    want = jax.grad(loss)(params)
+    assert jax.tree.structure(got) == jax.tree.structure(want)
+    for g, w in zip(jax.tree.leaves(got), jax.tree.leaves(want), strict=True):
+        np.testing.assert_allclose(g, w, rtol=2e-5, atol=1e-6)
+    head_grads = got["params"]["mean_head"]
+    assert np.any(np.abs(np.asarray(head_grads["sigma_w"])) > 1e-4)  # the noise path is exercised
+
+
 # ---------------------------------------------------------------- agent.uncertainty
 
 # exp(log_std) = [1, 2, 4]:     mean 7/3, max 4,   sum 7
