@@ -83,12 +83,17 @@ def unroll_threefry_on_cpu() -> bool:
 
 
 def over_runs(fn: Callable[..., Any], vmapped: bool = True, in_axes: Any = 0) -> Callable:
-    """`fn` over a leading run axis: `jax.vmap(fn, in_axes)`, or with `vmapped=False` the same
-    signature on a run axis of size 1 without vmap (an expert with an ordered host callback, a
-    person at `arld_jax.human`'s page, cannot be batched, and its `lax.cond` must stay a branch)."""
-    if vmapped:
-        return jax.vmap(fn, in_axes=in_axes)
+    """`fn` over a leading run axis: `jax.vmap(fn, in_axes)`, or the same signature on a run axis of
+    size 1 without vmap: always with `vmapped=False` (an expert with an ordered host callback, a
+    person at `arld_jax.human`'s page, cannot be batched, and its `lax.cond` must stay a branch),
+    and whenever the run axis has size 1. A single run is then the single-run program that
+    `test_vmapped_seed_equals_single_run` compares with a seed of a vmapped sweep (the same
+    computation; float rounding differs, as it does between sweeps of different sizes). On
+    XLA:CPU it is faster: vmapped over 1, each weight gradient of the update came out transposed
+    and was transposed back inside Adam's fusion, 1.12x slower at 1 env (benchmarks/README.md,
+    "Session 14")."""
     axes = in_axes if isinstance(in_axes, tuple) else None
+    mapped = lambda args: [a for i, a in enumerate(args) if axes is None or axes[i] == 0]  # noqa: E731
 
     def one_run(*args: Any) -> Any:
         args = [
@@ -97,7 +102,15 @@ def over_runs(fn: Callable[..., Any], vmapped: bool = True, in_axes: Any = 0) ->
         ]
         return jax.tree.map(lambda x: x[None], fn(*args))
 
-    return one_run
+    if not vmapped:
+        return one_run
+    batched = jax.vmap(fn, in_axes=in_axes)
+
+    def runs(*args: Any) -> Any:
+        sizes = {jnp.shape(x)[0] for x in jax.tree.leaves(mapped(args))}
+        return one_run(*args) if sizes == {1} else batched(*args)
+
+    return runs
 
 
 def jit_chunk(trainer: Trainer, donate: bool = True, vmapped: bool = True) -> Callable[..., Any]:

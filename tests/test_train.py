@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 
 import jax
+import jax.experimental
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from arld_jax.envs import toy_target_action
 from arld_jax.expert import toy_expert
 from arld_jax.rundir import is_key
 from arld_jax.sweep import Sweep
-from arld_jax.train import jit_chunk, make_train, only_if, unroll_threefry_on_cpu
+from arld_jax.train import jit_chunk, make_train, only_if, over_runs, unroll_threefry_on_cpu
 
 TOY_EXPERT = toy_expert()
 SEEDS = (0, 1, 2)
@@ -223,16 +224,36 @@ def _loop_copies(hlo: str) -> list[tuple[int, ...]]:
     return shapes
 
 
-def test_compiled_loop_copies_neither_the_replay_nor_the_agent_state():
-    """Performance structure, not timing: in the seed-vmapped chunk that run.py compiles, XLA must
-    update the replay and the AgentState in place. Regressions this catches (each seen in session
-    5, benchmarks/README.md): a `lax.cond` around the update copied the whole AgentState at every
-    iteration (about 2x its size in loop copies here), and without `compiler_options()` the sum
-    tree was copied in the loop (at 1M x 8 seeds that made the replay work 12x slower)."""
+def test_a_run_axis_of_one_is_squeezed_not_vmapped():
+    """`over_runs` vmaps over runs, except a run axis of size 1, which it squeezes: the function
+    then sees unbatched arrays (an ordered host callback, which vmap refuses, works) and its
+    outputs get the run axis back."""
+    seen = []
+
+    def fn(x, y):  # noqa: ANN001, ANN202
+        jax.experimental.io_callback(lambda v: seen.append(np.asarray(v)), None, x, ordered=True)
+        return {"sum": x + y, "y": y}
+
+    one = jax.jit(over_runs(fn, in_axes=(0, None)))(jnp.ones((1, 3)), jnp.float32(2.0))
+    assert one["sum"].shape == (1, 3) and one["y"].shape == (1,)
+    np.testing.assert_array_equal(one["sum"], 3.0)
+    assert len(seen) == 1 and seen[0].shape == (3,)  # unbatched inside
+    with pytest.raises(Exception, match="(?i)vmap"):
+        jax.jit(over_runs(fn, in_axes=(0, None)))(jnp.ones((2, 3)), jnp.float32(2.0))
+
+
+@pytest.mark.parametrize("num_runs", [1, 2])
+def test_compiled_loop_copies_neither_the_replay_nor_the_agent_state(num_runs: int):
+    """Performance structure, not timing: in the chunk that run.py compiles (seed-vmapped; a single
+    run squeezed, `over_runs`), XLA must update the replay and the AgentState in place.
+    Regressions this catches (each seen in session 5, benchmarks/README.md): a `lax.cond` around
+    the update copied the whole AgentState at every iteration (about 2x its size in loop copies
+    here), and without `compiler_options()` the sum tree was copied in the loop (at 1M x 8 seeds
+    that made the replay work 12x slower)."""
     cfg = tiny(replay_capacity=5_000, hidden_sizes=(64, 64))
     trainer = make_train(cfg)
-    hps = _stack([hparams_from_config(cfg)] * 2)
-    state = jax.jit(jax.vmap(trainer.init))(jax.random.split(jax.random.key(0), 2), hps)
+    hps = _stack([hparams_from_config(cfg)] * num_runs)
+    state = jax.jit(jax.vmap(trainer.init))(jax.random.split(jax.random.key(0), num_runs), hps)
     run = jit_chunk(trainer, donate=False)
     compiled = run.lower(state, hps, jnp.int32(0), 1).compile()
     copies = _loop_copies(compiled.as_text())
@@ -242,7 +263,7 @@ def test_compiled_loop_copies_neither_the_replay_nor_the_agent_state():
     copied = sum(int(np.prod(s)) for s in copies)
     assert copied < 0.5 * agent_elements, (copied, agent_elements, copies)
     # The options change which buffers are copied, never a result: same numbers as without them.
-    plain = jax.jit(jax.vmap(trainer.run_periods, in_axes=(0, 0, None, None)), static_argnums=3)
+    plain = jax.jit(over_runs(trainer.run_periods, in_axes=(0, 0, None, None)), static_argnums=3)
     _, want = plain(state, hps, jnp.int32(0), 1)
     _, got = compiled(state, hps, jnp.int32(0))
     for name in ("eval_return", "critic_loss", "actor_loss", "uncertainty_trace"):
