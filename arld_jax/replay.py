@@ -251,6 +251,9 @@ def make_prioritized_replay(
         """
         tree = state.tree
         chex.assert_shape(tree, (2 * num_leaves,))
+        # Row j holds node j's children (tree[2j], tree[2j + 1]): one gather per level, not two
+        # (the same values; 1.2x faster replay work, benchmarks/README.md, "Session 14").
+        children_of = tree.reshape(num_leaves, 2)
         total = tree[1]
         # Stratified sampling (Schaul App. B.2.1): split [0, total) into batch_size equal
         # segments and draw one value uniformly from each; lowers the variance of a batch.
@@ -261,8 +264,8 @@ def make_prioritized_replay(
 
         def level(_: int, carry: tuple[jax.Array, jax.Array]) -> tuple[jax.Array, jax.Array]:
             node, u = carry
-            left = tree[2 * node]
-            right = tree[2 * node + 1]
+            children = children_of[node]
+            left, right = children[:, 0], children[:, 1]
             # Never step into an empty subtree: after round-off u can exceed a node's sum.
             go_right = (u >= left) & (right > 0.0)
             u = jnp.where(go_right, u - left, u)
