@@ -1162,7 +1162,7 @@ class PeerSizes:
 
 
 PEERS_FULL = PeerSizes(
-    env_counts=(16, 1), period_env_steps=4000, eval_episodes=5, timed_periods=2, capacity=100_000
+    env_counts=(16, 1), period_env_steps=4000, eval_episodes=5, timed_periods=3, capacity=100_000
 )
 PEERS_QUICK = PeerSizes(
     env_counts=(16,), period_env_steps=512, eval_episodes=1, timed_periods=1, capacity=10_000
