@@ -34,8 +34,9 @@ def head_matmul(x: jax.Array, w: jax.Array) -> jax.Array:
     x^T out first (`optimization_barrier` keeps XLA from folding the transpose back into the dot)
     turns it into a plain row-major product: 36 us. Both heads of `Actor` read the same phi, so
     XLA computes its transpose once. The whole 16-env trainer ran 1.10-1.12x faster with it
-    (benchmarks/README.md, "Session 14"). Not bit-identical to autodiff's x^T g (another summation
-    order over the batch); learning with it is checked in experiments/README.md."""
+    (benchmarks/README.md, "Session 14"); on a GPU it costs one small transpose. Not bit-identical
+    to autodiff's x^T g (another summation order over the batch); learning with it is checked in
+    experiments/README.md."""
     return x @ w
 
 
