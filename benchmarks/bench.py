@@ -54,7 +54,7 @@ from arld_jax.config import Config, hparams_from_config
 from arld_jax.envs import Env, make_env
 from arld_jax.networks import NUM_CRITICS
 from arld_jax.replay import PrioritizedReplay, make_prioritized_replay, replay_nbytes
-from arld_jax.train import Trainer, compiler_options, jit_chunk, make_train
+from arld_jax.train import Trainer, compiler_options, jit_chunk, make_train, over_runs
 from arld_jax.types import Transition, example_transition
 
 SECTIONS: tuple[str, ...] = (
@@ -666,13 +666,13 @@ def trainer_config(
 
 
 def compile_trainer(trainer: Trainer, num_seeds: int) -> tuple[Any, Any, Any, dict[str, float]]:
-    """vmapped init and one-period `run_periods`, jitted as run.py does (static num_periods,
-    donated state). Returns the compiled chunk, state, hparams and the seconds of tracing and
+    """Init and one-period `run_periods` over seeds, jitted as run.py does (`over_runs`, static
+    num_periods, donated state). Returns the compiled chunk, state, hparams and the seconds of tracing and
     lowering (`lower_s`, never cached) and of the XLA compile (`compile_s`, cacheable)."""
     cfg = trainer.cfg
     hps = broadcast_seeds(hparams_from_config(cfg), num_seeds)
     keys = jax.random.split(jax.random.key(cfg.seed), num_seeds)
-    state = block(jax.jit(jax.vmap(trainer.init))(keys, hps))
+    state = block(jax.jit(over_runs(trainer.init))(keys, hps))
     run = jit_chunk(trainer)
     start = time.perf_counter()
     lowered = run.lower(state, hps, jnp.int32(0), 1)
