@@ -212,8 +212,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="two run directories, cell by cell: a - b of the mean return and P(a > b) with 95% "
         "stratified-bootstrap CIs (rliable)",
     )
-    comp.add_argument("run_dir_a")
-    comp.add_argument("run_dir_b")
+    for side in ("a", "b"):
+        comp.add_argument(
+            f"run_dir_{side}",
+            metavar=f"RUN_DIR_{side.upper()}",
+            help="a run directory, or several run with different seeds, comma-separated (pooled)",
+        )
     comp.add_argument(
         "--at", default="", metavar="STEPS", help="also compare at these env steps (comma list)"
     )
@@ -291,6 +295,14 @@ def require_run_dir(path: Path) -> None:
         raise SystemExit(f"error: {path} is not a run directory (no {CONFIG_FILE})")
 
 
+def run_dir_list(arg: str) -> list[Path]:
+    """`compare`'s RUN_DIR argument: one directory, or directories joined by commas (a directory
+    whose own name holds a comma is taken whole when it exists)."""
+    if Path(arg).exists() or "," not in arg:
+        return [Path(arg)]
+    return [Path(part) for part in arg.split(",") if part.strip()]
+
+
 def compare_command(args: argparse.Namespace) -> None:
     """`compare A B [--at STEPS] [--out FILE]`: print (and write) `results.compare_runs`."""
     from arld_jax import results
@@ -300,10 +312,12 @@ def compare_command(args: argparse.Namespace) -> None:
     except ValueError:
         msg = f"error: --at {args.at!r}: a comma list of env steps, e.g. 100000,200000"
         raise SystemExit(msg) from None
-    for d in (args.run_dir_a, args.run_dir_b):
-        require_run_dir(Path(d))
+    sides = [run_dir_list(args.run_dir_a), run_dir_list(args.run_dir_b)]
+    for d in sides[0] + sides[1]:
+        require_run_dir(d)
     try:
-        rows = results.compare_runs(args.run_dir_a, args.run_dir_b, at)
+        a, b = (results.pool_runs(dirs) for dirs in sides)
+        rows = results.compare_runs(a, b, at)
     except ValueError as err:
         raise SystemExit(f"error: {err}") from None
     text = (
@@ -312,7 +326,11 @@ def compare_command(args: argparse.Namespace) -> None:
         + (f" --at {args.at}" if args.at else "")
         + "`. a − b of the mean return over seeds and the probability that a run of a scores "
         "higher than a run of b, each with a 95% stratified-bootstrap CI (rliable, 20,000 "
-        "resamples, seed 0).\n\n" + results.format_comparison(rows) + "\n"
+        "resamples, seed 0), and the difference's Welch t 95% CI. "
+        + results.INTERVAL_READING
+        + "\n\n"
+        + results.format_comparison(rows)
+        + "\n"
     )
     print(text, end="")
     if args.out:

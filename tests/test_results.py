@@ -1,6 +1,6 @@
 """Tests for arld_jax.results (summary table) and arld_jax.plots (figures) on synthetic run dirs.
 
-No JAX here: the run directories are written by hand in the format of arld_jax.run, with numbers
+No JAX here (but for one test of the `compare` command): the run directories are written by hand in the format of arld_jax.run, with numbers
 chosen so that every summary value can be worked out on paper.
 """
 
@@ -58,6 +58,7 @@ def write_run_dir(
     periods: int = PERIODS,
     total_periods: int = PERIODS,
     expert: float | None = 3000.0,
+    seeds: tuple[int, ...] = SEEDS,
 ) -> Path:
     """Write a run directory in run.py's format: len(cells) cells x 3 seeds, ``periods`` of
     ``total_periods`` evaluation periods present (fewer = a partial sweep).
@@ -83,7 +84,7 @@ def write_run_dir(
             {
                 "config": config,
                 "sweep": sweep,
-                "seeds": list(SEEDS),
+                "seeds": list(seeds),
                 "preset": "default",
                 "command": "python -m arld_jax.run --synthetic",
                 "expert": None if expert is None else {"eval_return": expert},
@@ -94,7 +95,7 @@ def write_run_dir(
     for c, overrides in enumerate(cells):
         fields = {**BASE_FIELDS, **overrides}
         label = " ".join(f"{k}={fields[k]}" for k in sweep)
-        for s in SEEDS:
+        for s in seeds:
             runs.append({"run": len(runs), "cell": c, "cell_label": label, "seed": s, **fields})
     (path / "runs.json").write_text(json.dumps(runs))
 
@@ -123,7 +124,7 @@ def write_run_dir(
         m["eval_return"][r] = 100.0 * (c + 1) * (p_idx + 1) + 10.0 * s
         m["uncertainty_trace"][r] = np.exp(-point / 10.0) + 0.05 * s + 0.02 * rng.random((p_, t))
         if entry["strategy"] != "none":
-            m["demos_trace"][r] = np.minimum(BUDGET, (point + 1) * DEMO_RATE[s])
+            m["demos_trace"][r] = np.minimum(BUDGET, (point + 1) * DEMO_RATE[s % len(SEEDS)])
             m["queried_valid"][r, :6] = True
     m["demos_used"] = m["demos_trace"][:, :, -1].copy()
     np.savez(path / "metrics.npz", **m)
@@ -472,6 +473,96 @@ def test_bootstrap_difference_is_reproducible_and_leaves_global_rng_alone() -> N
     c = results.bootstrap_difference(x, y, reps=500, seed=1)
     assert (a["diff_lo"], a["diff_hi"]) == (b["diff_lo"], b["diff_hi"])
     assert (a["diff_lo"], a["diff_hi"], a["p_lo"]) != (c["diff_lo"], c["diff_hi"], c["p_lo"])
+
+
+def test_welch_interval_matches_scipy_and_a_hand_computation() -> None:
+    """`welch_ci95` is scipy's Welch t-test interval; by hand for x = (1, 3), y = (0, 0, 3):
+    mean(x) - mean(y) = 2 - 1 = 1, se^2 = 2/2 + 3/3 = 2, df = 2^2 / (1^2/1 + 1^2/2) = 8/3. One
+    value on a side has no interval; constant samples give the point."""
+    x, y = np.array([1.0, 3.0]), np.array([0.0, 0.0, 3.0])
+    lo, hi = results.welch_ci95(x, y)
+    half = stats.t.ppf(0.975, 8 / 3) * math.sqrt(2.0)
+    assert (lo, hi) == pytest.approx((1.0 - half, 1.0 + half), rel=1e-12)
+    rng = np.random.default_rng(3)
+    for n, m in ((5, 5), (5, 10), (3, 7)):
+        a, b = rng.normal(2.0, 1.0, n), rng.normal(0.0, 3.0, m)
+        want = stats.ttest_ind(a, b, equal_var=False).confidence_interval(0.95)
+        assert results.welch_ci95(a, b) == pytest.approx((want.low, want.high), rel=1e-10)
+    assert all(math.isnan(v) for v in results.welch_ci95(np.array([1.0]), y))
+    assert results.welch_ci95(np.full(3, 2.0), np.full(4, 5.0)) == (-3.0, -3.0)
+
+
+def test_bootstrap_rows_carry_the_welch_interval_and_the_table_shows_it() -> None:
+    """`bootstrap_difference` rows hold `welch_ci95` of the same samples, and `format_comparison`
+    prints it in its own column beside the bootstrap interval."""
+    x, y = np.array([1.0, 5, 3, 8, 2]), np.array([0.0, 4, 1, 2, 6])
+    row = results.bootstrap_difference(x, y, reps=500, seed=0)
+    assert (row["welch_lo"], row["welch_hi"]) == results.welch_ci95(x, y)
+    # With 5 values a side the bootstrap interval is the narrower one (interval_coverage.md).
+    assert row["welch_hi"] - row["welch_lo"] > row["diff_hi"] - row["diff_lo"]
+    table = results.format_comparison([dict(row, pair="a − b", metric="final return")])
+    lo, hi = results.welch_ci95(x, y)
+    assert f"| [{lo:,.0f}, {hi:,.0f}] |" in table and "Welch t 95% CI" in table
+
+
+def test_pooled_directories_compare_as_one_with_every_seed(tmp_path: Path) -> None:
+    """Seeds 0-2 and 3-5 of one experiment, written to two directories (the second one evaluation
+    short), pool into one run of 6 seeds over the 3 evaluations both have: compared with a third
+    directory, a - b is worked out by hand from eval_return = 100 (cell + 1) (p + 1) + 10 seed."""
+    cells, sweep = NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]}
+    first = write_run_dir(tmp_path / "s0-2", cells, sweep)
+    second = write_run_dir(tmp_path / "s3-5", cells, sweep, periods=3, seeds=(3, 4, 5))
+    other = write_run_dir(tmp_path / "other", cells, sweep)
+    pooled = results.pool_runs([first, second])
+    assert pooled.name == "s0-2+s3-5" and pooled.periods == 3 and pooled.partial
+    assert [c.seeds for c in results.group_cells(pooled)] == [[0, 1, 2, 3, 4, 5]] * 2
+    rows = results.compare_runs(pooled, other, reps=500)
+    final = next(r for r in rows if r["metric"] == "final return" and "bernoulli" in r["pair"])
+    # at the 3rd evaluation: cell 1 gives 600 + 10 seed; mean seed 2.5 pooled against 1 in other
+    assert final["diff"] == pytest.approx(10 * 2.5 - 10 * 1.0)
+    assert (final["n_a"], final["n_b"], final["env_steps"]) == (6, 3, 3 * EVAL_EVERY)
+    assert final["pair"] == "s0-2+s3-5:strategy=bernoulli − other:strategy=bernoulli"
+    alone = results.pool_runs([first])  # one directory: as loaded
+    assert (alone.path, alone.sources, alone.periods, len(alone.runs)) == (first, (), 4, 6)
+
+
+def test_pooling_refuses_shared_seeds_and_other_configs(tmp_path: Path) -> None:
+    """A seed in two of the directories, a config field that differs (naming it and both
+    values), or another sweep is a clear error; a different run length is allowed."""
+    cells, sweep = NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]}
+    first = write_run_dir(tmp_path / "a", cells, sweep)
+    with pytest.raises(ValueError, match="seed 0 of cell 'strategy=none' is in both"):
+        results.pool_runs([first, write_run_dir(tmp_path / "b", cells, sweep)])
+    other_gamma = write_run_dir(tmp_path / "g", cells, sweep, seeds=(7,))
+    config = json.loads((other_gamma / "config.json").read_text())
+    config["config"]["gamma"] = 0.9
+    (other_gamma / "config.json").write_text(json.dumps(config))
+    with pytest.raises(ValueError, match="differ in gamma 0.99 against 0.9"):
+        results.pool_runs([first, other_gamma])
+    with pytest.raises(ValueError, match="differ in sweep"):
+        results.pool_runs([first, write_run_dir(tmp_path / "s", cells[:1], {}, seeds=(8,))])
+    longer = write_run_dir(tmp_path / "l", cells, sweep, periods=6, total_periods=6, seeds=(9,))
+    assert results.pool_runs([first, longer]).periods == PERIODS
+
+
+def test_compare_command_pools_comma_separated_directories(tmp_path: Path, capsys) -> None:
+    """`compare A1,A2 B` pools A1 and A2; a pooling error is a clean exit naming the problem."""
+    from arld_jax import run  # the CLI (imports JAX, unlike the rest of this file)
+
+    cells, sweep = NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]}
+    a1 = write_run_dir(tmp_path / "a1", cells, sweep)
+    a2 = write_run_dir(tmp_path / "a2", cells, sweep, seeds=(3, 4))
+    b = write_run_dir(tmp_path / "b", cells, sweep)
+    run.main(["compare", f"{a1},{a2}", str(b), "--out", str(tmp_path / "c.md")])
+    assert (
+        "| a1+a2:strategy=none − b:strategy=none | final return | 5 / 3 |"
+        in capsys.readouterr().out
+    )
+    assert "Welch" in (tmp_path / "c.md").read_text()
+    with pytest.raises(SystemExit, match="seed 0 of cell"):
+        run.main(["compare", f"{a1},{a1}", str(b)])
+    with pytest.raises(SystemExit, match="not a run directory"):
+        run.main(["compare", f"{a1},{tmp_path}", str(b)])
 
 
 def test_comparison_pairs_include_active_against_greedy(tmp_path: Path) -> None:
