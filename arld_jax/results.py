@@ -706,7 +706,11 @@ def probability_of_improvement(x: np.ndarray, y: np.ndarray) -> float:
     return float(np.mean((x > y) + 0.5 * (x == y)))
 
 
-def compare(run_dir: str | Path | RunDir, reps: int = 20_000, seed: int = 0) -> list[dict]:
+BOOTSTRAP_REPS = 20_000
+"""Resamples of the seeds behind every bootstrap interval `compare` and `compare_runs` give."""
+
+
+def compare(run_dir: str | Path | RunDir, reps: int = BOOTSTRAP_REPS, seed: int = 0) -> list[dict]:
     """Pairwise differences of `comparison_pairs` with stratified-bootstrap 95% CIs (rliable,
     Agarwal et al. 2021): for the final and the area-under-curve return, the difference of the
     cells' means over seeds and the probability that a run of a beats a run of b. Rows: pair,
@@ -765,7 +769,7 @@ def compare_runs(
     dir_a: str | Path | RunDir,
     dir_b: str | Path | RunDir,
     at_steps: Sequence[int] = (),
-    reps: int = 20_000,
+    reps: int = BOOTSTRAP_REPS,
     seed: int = 0,
 ) -> list[dict[str, Any]]:
     """Cells of two run directories compared as `compare` compares cells of one: a − b of the mean
@@ -825,13 +829,14 @@ def compare_runs(
     return rows
 
 
-INTERVAL_READING = (
-    "With 5 seeds per side the bootstrap interval of a difference is too narrow: where there was "
-    "no difference it excluded 0 in 12% of simulated pairs, not 5% (Welch's: 5%; "
-    "`experiments/stats/interval_coverage.md`). Read a difference as separated when Welch's "
-    "interval excludes 0."
+INTERVALS = (
+    f"each with a 95% stratified-bootstrap CI (rliable, {BOOTSTRAP_REPS:,} resamples of the seeds, "
+    "numpy seed 0), and the difference's Welch t 95% CI. With 5 seeds per side the bootstrap "
+    "interval of a difference is too narrow: where there was no difference it excluded 0 in 12% "
+    "of simulated pairs, not 5% (Welch's: 5%; `experiments/stats/interval_coverage.md`). Read a "
+    "difference as separated when Welch's interval excludes 0."
 )
-"""How to read `format_comparison`'s intervals (printed above every comparison table)."""
+"""What `format_comparison`'s intervals are and how to read them (above every comparison table)."""
 
 
 def format_comparison(rows: list[dict[str, Any]]) -> str:
@@ -865,9 +870,8 @@ def write_comparison(run_dir: str | Path | RunDir) -> Path | None:
         f"# Pairwise comparison: {run.path.name}",
         "",
         "a − b: the difference of the cells' mean returns over seeds, and the probability that a "
-        "run of a scores higher than a run of b (Agarwal et al. 2021), each with a 95% stratified "
-        "bootstrap CI (rliable, 20,000 resamples of the seeds), and the difference's Welch t "
-        f"95% CI. {INTERVAL_READING} At the last evaluation present: "
+        f"run of a scores higher than a run of b (Agarwal et al. 2021), {INTERVALS} "
+        "At the last evaluation present: "
         f"{int(env_steps_axis(run)[-1]):,} "
         "env steps." + (" **Partial run directory.**" if run.partial else ""),
         "",

@@ -325,12 +325,7 @@ def compare_command(args: argparse.Namespace) -> None:
         f"Command: `python -m arld_jax.run compare {args.run_dir_a} {args.run_dir_b}"
         + (f" --at {args.at}" if args.at else "")
         + "`. a − b of the mean return over seeds and the probability that a run of a scores "
-        "higher than a run of b, each with a 95% stratified-bootstrap CI (rliable, 20,000 "
-        "resamples, seed 0), and the difference's Welch t 95% CI. "
-        + results.INTERVAL_READING
-        + "\n\n"
-        + results.format_comparison(rows)
-        + "\n"
+        f"higher than a run of b, {results.INTERVALS}\n\n" + results.format_comparison(rows) + "\n"
     )
     print(text, end="")
     if args.out:
