@@ -297,15 +297,22 @@ def matmul_chain(steps: int, dtype: jnp.dtype) -> Callable[..., jax.Array]:
     return jax.jit(chain)
 
 
-def measure_matmul(sizes: Sizes, ensembles: int, dtype: jnp.dtype, width: int = 256) -> dict:
-    """GFLOP/s of the chain (2 * width^3 FLOPs per matmul per ensemble member)."""
+def matmul_call(
+    sizes: Sizes, ensembles: int, dtype: jnp.dtype, width: int = 256
+) -> tuple[Callable[[], jax.Array], int]:
+    """One call of the chain on fixed inputs, and its FLOPs (2 * width^3 per matmul per member)."""
     k_x, k_w = jax.random.split(jax.random.key(0))
     shape = (ensembles, width, width)
     x = jax.random.normal(k_x, shape).astype(dtype)
     w = (1.5 / math.sqrt(width) * jax.random.normal(k_w, shape)).astype(dtype)
     chain = matmul_chain(sizes.matmul_steps, dtype)
-    times = time_calls(lambda: chain(x, w), sizes.repeats)
-    flops = 2 * width**3 * ensembles * sizes.matmul_steps
+    return (lambda: chain(x, w)), 2 * width**3 * ensembles * sizes.matmul_steps
+
+
+def measure_matmul(sizes: Sizes, ensembles: int, dtype: jnp.dtype, width: int = 256) -> dict:
+    """GFLOP/s of the chain (2 * width^3 FLOPs per matmul per ensemble member)."""
+    call, flops = matmul_call(sizes, ensembles, dtype, width)
+    times = time_calls(call, sizes.repeats)
     return summarize(times) | {
         "flops_per_call": flops,
         "gflops_median": flops / statistics.median(times) / 1e9,
@@ -559,8 +566,9 @@ def section_env(b: Bench) -> dict:
 # ---------------------------------------------------------------- 4. update-only
 
 
-def update_scan(agent: Agent, num_updates: int) -> Callable[..., Any]:
-    """Jitted lax.scan of `num_updates` SAC updates on one fixed batch."""
+def update_scan(agent: Agent, num_updates: int, num_seeds: int = 0) -> Callable[..., Any]:
+    """Jitted lax.scan of `num_updates` SAC updates on one fixed batch. With `num_seeds` > 0 it is
+    vmapped over that many agents (every input with a leading seed axis), as in a seed sweep."""
 
     def run(state: Any, batch: Transition, weights: jax.Array, hp: Any, key: jax.Array) -> Any:
         def body(s: Any, k: jax.Array) -> tuple[Any, jax.Array]:
@@ -569,29 +577,37 @@ def update_scan(agent: Agent, num_updates: int) -> Callable[..., Any]:
 
         return jax.lax.scan(body, state, jax.random.split(key, num_updates))
 
-    return jax.jit(run, compiler_options=compiler_options())
+    return jax.jit(jax.vmap(run) if num_seeds else run, compiler_options=compiler_options())
 
 
-def updates_per_s(b: Bench, cfg: Config, obs_dim: int, action_dim: int) -> dict:
-    """Update-only updates/s of `cfg`'s agent (memoized on the shapes and dtype)."""
+def updates_per_s(b: Bench, cfg: Config, obs_dim: int, action_dim: int, num_seeds: int = 1) -> dict:
+    """Update-only updates/s (all seeds together) of `cfg`'s agent; `num_seeds` > 1 vmaps the
+    update over that many agents, one program as in a seed sweep (1: the unvmapped single-run
+    program, as `train.over_runs` runs one seed). Memoized on the shapes, dtype and seeds."""
     memo_key = (
         "update", obs_dim, action_dim, cfg.hidden_sizes, cfg.batch_size, cfg.matmul_dtype,
-        cfg.noisy_runs,
+        cfg.noisy_runs, num_seeds,
     )  # fmt: skip
     if memo_key not in b.memo:
         agent, state, batch, weights, hp = agent_and_inputs(cfg, obs_dim, action_dim)
-        run = update_scan(agent, b.sizes.updates)
+        key = jax.random.key(3)
+        if num_seeds > 1:
+            seeds = lambda x: jnp.broadcast_to(x, (num_seeds, *x.shape))
+            state, batch, weights, hp = jax.tree.map(seeds, (state, batch, weights, hp))
+            key = jax.random.split(key, num_seeds)
+        run = update_scan(agent, b.sizes.updates, num_seeds if num_seeds > 1 else 0)
         holder = {"state": state}
 
         def call() -> Any:
-            holder["state"], losses = run(holder["state"], batch, weights, hp, jax.random.key(3))
+            holder["state"], losses = run(holder["state"], batch, weights, hp, key)
             return losses
 
         times = time_calls(call, b.sizes.repeats)
         b.memo[memo_key] = summarize(times) | {
             "matmul_dtype": cfg.matmul_dtype,
-            "updates_per_call": b.sizes.updates,
-            "updates_per_s": b.sizes.updates / statistics.median(times),
+            "num_seeds": num_seeds,
+            "updates_per_call": b.sizes.updates * num_seeds,
+            "updates_per_s": b.sizes.updates * num_seeds / statistics.median(times),
         }
     return b.memo[memo_key]
 
@@ -617,9 +633,18 @@ def section_update(b: Bench) -> dict:
             "limit_updates_per_s": limit,
             "fraction_of_limit": r["updates_per_s"] / limit,
         }
+    out["float32"] |= interleaved_fraction(b)
     print_table(
-        f"update only, B=256, 2x256, {b.sizes.updates} scanned updates on a fixed batch",
-        ["matmul inputs", "updates/s", "ms/update", "limit updates/s", "fraction of limit"],
+        f"update only, B=256, 2x256, {b.sizes.updates} scanned updates on a fixed batch "
+        "(interleaved: the median of per-round fractions, matmul chains and update calls alternated)",
+        [
+            "matmul inputs",
+            "updates/s",
+            "ms/update",
+            "limit updates/s",
+            "fraction of limit",
+            "interleaved",
+        ],
         [
             [
                 k,
@@ -627,11 +652,42 @@ def section_update(b: Bench) -> dict:
                 1e3 / v["updates_per_s"],
                 v["limit_updates_per_s"],
                 v["fraction_of_limit"],
+                v.get("fraction_of_limit_interleaved", ""),
             ]
             for k, v in out.items()
         ],
     )
     return out
+
+
+def interleaved_fraction(b: Bench) -> dict:
+    """The f32 update's fraction of the limit with its limit measured beside it.
+
+    This VM's speed drifts within minutes, so an update rate divided by a matmul rate taken in
+    another section mixes two speeds. Here each round times the 1- and 8-ensemble f32 matmul
+    chains and then one update call, and divides that round's update rate by that round's limit
+    (the better chain's GFLOP/s, as `matmul_gflops`, over the analytic FLOPs); the median over
+    rounds is reported, with every round's fraction."""
+    cfg = Config(hidden_sizes=PAPER_HIDDEN, batch_size=PAPER_BATCH, **PLAIN_SAC)
+    flops = analytic_update_flops(HC_OBS_DIM, HC_ACTION_DIM, cfg.hidden_sizes, cfg.batch_size)
+    chains = [matmul_call(b.sizes, e, jnp.float32) for e in (1, 8)]
+    agent, state, batch, weights, hp = agent_and_inputs(cfg, HC_OBS_DIM, HC_ACTION_DIM)
+    run = update_scan(agent, b.sizes.updates)
+    holder = {"state": state}
+
+    def update_call() -> Any:
+        holder["state"], losses = run(holder["state"], batch, weights, hp, jax.random.key(3))
+        return losses
+
+    fractions = []
+    for _ in range(2 * b.sizes.repeats):
+        gflops = max(flop / 1e9 / min(time_calls(call, 1)) for call, flop in chains)
+        updates_per_s = b.sizes.updates / time_calls(update_call, 1)[0]
+        fractions.append(updates_per_s / (gflops * 1e9 / flops["total"]))
+    return {
+        "fraction_of_limit_interleaved": statistics.median(fractions),
+        "fractions_interleaved": fractions,
+    }
 
 
 # ---------------------------------------------------------------- 5. full trainer
@@ -964,20 +1020,45 @@ def section_replay(b: Bench) -> dict:
 
 
 def section_seeds(b: Bench) -> dict:
-    """Total updates/s of N vmapped seeds (1 env each) against one seed run N times in a row."""
+    """Total updates/s of N vmapped seeds (1 env each) against one seed run N times in a row,
+    and the same for the update alone (N vmapped agents on a fixed batch, the trainer's network
+    and batch): the trainer does the update's work and more, so its N-seed total cannot exceed
+    the update alone's, and `update_ceiling_on_speedup` = (update alone, N seeds) / (trainer, 1
+    seed) bounds the trainer's speedup in the same run."""
     runs = {n: trainer_run(b, 1, n) for n in b.sizes.seed_counts}
+    trainer = b.memo[("trainer", 1, b.sizes.seed_counts[0])][0]
+    alone = {
+        n: updates_per_s(b, trainer.cfg, trainer.obs_dim, trainer.action_dim, n)
+        for n in b.sizes.seed_counts
+    }
     single = runs[1]["updates_per_s"] if 1 in runs else float("nan")
+    alone_single = alone[1]["updates_per_s"] if 1 in alone else float("nan")
     out = {}
     for n, r in runs.items():
+        a = alone[n]["updates_per_s"]
         out[f"seeds_{n}"] = {k: v for k, v in r.items() if not k.startswith("_")} | {
             "total_updates_per_s": r["updates_per_s"],
             "per_seed_updates_per_s": r["updates_per_s"] / n,
             "speedup_vs_separate_runs": r["updates_per_s"] / single,
             "slower_than_separate_runs": bool(r["updates_per_s"] < single),
+            "update_alone_total_updates_per_s": a,
+            "update_alone_speedup_vs_one_seed": a / alone_single,
+            "update_ceiling_on_speedup": a / single,
         }
     print_table(
-        "vmapped seeds, 1 env each, 1 update per env step (separate runs = 1 seed's rate)",
-        ["seeds", "total updates/s", "per seed", "vs N separate runs", "slower?", "compile s"],
+        "vmapped seeds, 1 env each, 1 update per env step (separate runs = 1 seed's rate); "
+        "update alone = the same seeds' updates on a fixed batch, no env or replay",
+        [
+            "seeds",
+            "total updates/s",
+            "per seed",
+            "vs N separate runs",
+            "slower?",
+            "compile s",
+            "update alone, total",
+            "update alone vs 1 seed",
+            "ceiling on speedup",
+        ],
         [
             [
                 n,
@@ -986,6 +1067,9 @@ def section_seeds(b: Bench) -> dict:
                 r["speedup_vs_separate_runs"],
                 "yes" if r["slower_than_separate_runs"] else "no",
                 r["compile_s"],
+                r["update_alone_total_updates_per_s"],
+                r["update_alone_speedup_vs_one_seed"],
+                r["update_ceiling_on_speedup"],
             ]
             for n, r in zip(runs, out.values(), strict=True)
         ],
@@ -1520,8 +1604,9 @@ def print_summary(sections: dict) -> None:
     ]
     seed_rows = [
         [
-            f"{k.replace('_', ' ')} vmapped: total updates/s (x separate)",
-            f"{v['total_updates_per_s']:,.0f} ({v['speedup_vs_separate_runs']:.2f}x)",
+            f"{k.replace('_', ' ')} vmapped: total updates/s (x separate; update alone x 1 seed)",
+            f"{v['total_updates_per_s']:,.0f} ({v['speedup_vs_separate_runs']:.2f}x; "
+            f"{v['update_alone_speedup_vs_one_seed']:.2f}x)",
         ]
         for k, v in sections.get("seeds", {}).items()
         if isinstance(v, dict) and "total_updates_per_s" in v
@@ -1563,6 +1648,11 @@ def print_summary(sections: dict) -> None:
         ["physical limit f32, updates/s", g("flops", "limit_updates_per_s_f32")],
         *env_rows,
         ["update only f32, updates/s", g("update", "float32", "updates_per_s")],
+        ["update only f32, fraction of limit", g("update", "float32", "fraction_of_limit")],
+        [
+            "update only f32, fraction of limit (interleaved)",
+            g("update", "float32", "fraction_of_limit_interleaved"),
+        ],
         ["update only bf16, updates/s", g("update", "bfloat16", "updates_per_s")],
         [
             "update only f32 with noise draws, updates/s",
