@@ -566,9 +566,12 @@ def section_env(b: Bench) -> dict:
 # ---------------------------------------------------------------- 4. update-only
 
 
-def update_scan(agent: Agent, num_updates: int, num_seeds: int = 0) -> Callable[..., Any]:
+def update_scan(
+    agent: Agent, num_updates: int, num_seeds: int = 0, extra_options: dict | None = None
+) -> Callable[..., Any]:
     """Jitted lax.scan of `num_updates` SAC updates on one fixed batch. With `num_seeds` > 0 it is
-    vmapped over that many agents (every input with a leading seed axis), as in a seed sweep."""
+    vmapped over that many agents (every input with a leading seed axis), as in a seed sweep.
+    `extra_options` are XLA options added to `compiler_options()` (`ab_xla_options.py`)."""
 
     def run(state: Any, batch: Transition, weights: jax.Array, hp: Any, key: jax.Array) -> Any:
         def body(s: Any, k: jax.Array) -> tuple[Any, jax.Array]:
@@ -577,7 +580,8 @@ def update_scan(agent: Agent, num_updates: int, num_seeds: int = 0) -> Callable[
 
         return jax.lax.scan(body, state, jax.random.split(key, num_updates))
 
-    return jax.jit(jax.vmap(run) if num_seeds else run, compiler_options=compiler_options())
+    options = compiler_options() | (extra_options or {})
+    return jax.jit(jax.vmap(run) if num_seeds else run, compiler_options=options)
 
 
 def updates_per_s(b: Bench, cfg: Config, obs_dim: int, action_dim: int, num_seeds: int = 1) -> dict:

@@ -1,20 +1,27 @@
-"""Where one SAC update's time goes: a profiler trace of the update alone, summed per XLA op.
+"""Where the time of one SAC update, or of the trainer's loop, goes: a profiler trace summed per op.
 
-    python benchmarks/profile_update.py              # B 256, 2x256, HalfCheetah's shapes
-    python benchmarks/profile_update.py --seeds 8    # the update vmapped over 8 agents
-    python benchmarks/profile_update.py --top 40     # and the 40 costliest ops
+    python benchmarks/profile_update.py                      # the update alone, B 256, 2x256
+    python benchmarks/profile_update.py --seeds 8            # the update vmapped over 8 agents
+    python benchmarks/profile_update.py --trainer 1          # the trainer, 1 env, C physics
+    python benchmarks/profile_update.py --trainer 16 --backend mjx --top 40
 
-It times `bench.update_scan` (the benchmark's update-alone program, on a fixed batch), then traces
-one call with `jax.profiler` and XLA:CPU's per-op trace events (`--xla_cpu_enable_xprof_traceme`),
-and adds up each op's duration, naming ops through the compiled HLO's `op_name` metadata. Ops run on
-the CPU's threads side by side, so the busy time of all threads is printed against the wall time
-(`threads busy / wall` near the core count means the cores are never idle). Categories:
+The update alone is the benchmark's program (`bench.update_scan`, on a fixed batch, HalfCheetah's
+shapes); the trainer is `bench.trainer_config` at the paper's sizes (1 update per env step, periods of
+2,000 env steps, one evaluation episode), compiled as the driver does (`bench.compile_trainer`). The
+script times untraced calls, then traces one call with `jax.profiler` and XLA:CPU's per-op events
+(`--xla_cpu_enable_xprof_traceme`), names each op through the compiled HLO's `op_name` metadata (its
+jax scope) and sums the ops' durations per category. Ops run side by side on the CPU's threads, so
+each category is printed as a share of the threads' capacity over the traced span (span x threads
+that ran at least 5% of the ops' time), and what no op used is "idle": a thread waiting on a
+dependency or on the runtime's dispatch between ops (or running work that has no trace event). Perfetto's export keeps the first 1,000,000 events (about 650 trainer
+iterations at 1 env); the span is that of the events kept, so the shares hold for the part traced
+(the trainer's evaluation, at the end of a period, is then not in it; bench.py times it alone).
 
-* matmul: the dots (YNNPACK fusions and plain dots);
-* networks and losses: the element-wise work of the forward and backward passes (bias + ReLU, the
-  ReLU masks, the Gaussian policy's squashing and log-probabilities, the loss reductions);
-* optimizer and targets: Adam and the Polyak update (element-wise over every parameter);
-* other: everything else (random numbers, loop bookkeeping).
+Categories: the update's matmuls (YNNPACK fusions and dots), its networks' and losses' element-wise
+work (bias + ReLU, ReLU masks, the policy's squashing and log-probabilities, loss reductions), its
+optimizer and targets (Adam and Polyak, element-wise over every parameter); in the trainer also the
+env step (`env_step`: with C physics a host callback), the replay (`replay_*`: add, sample,
+priorities), evaluation, and acting and bookkeeping (the rest of the loop).
 
 A timing, so run it on a quiet machine and read the shares, not the microseconds (benchmarks/README.md).
 """
@@ -23,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import dataclasses
 import gzip
 import json
 import os
@@ -30,7 +38,9 @@ import re
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 os.environ["XLA_FLAGS"] = (
     os.environ.get("XLA_FLAGS", "") + " --xla_cpu_enable_xprof_traceme=true"
@@ -39,8 +49,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import bench  # noqa: E402
 import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
 
 from arld_jax.config import Config  # noqa: E402
+from arld_jax.train import make_train  # noqa: E402
 
 NETWORK_SCOPES = ("Actor", "Critic", "softplus", "_normal", "tanh", "log", "exp", "reduce_sum")
 OPTIMIZER_OPS = ("add", "sub", "mul", "div", "sqrt", "pow", "integer_pow", "select_n")
@@ -57,78 +69,135 @@ def op_names(hlo_text: str) -> dict[str, str]:
 
 
 def category(op: str, scope: str) -> str:
-    """The category of trace op `op` with HLO scope `scope` (module docstring)."""
-    if op.startswith(("ynn", "dot")):
-        return "matmul"
-    inner = scope.split("closed_call/", 1)[-1]
-    if any(s in inner for s in NETWORK_SCOPES):
-        return "networks and losses"
-    if "/" not in inner and inner in OPTIMIZER_OPS:  # top-level arithmetic of adam_step / polyak
-        return "optimizer and targets"
-    return "other"
+    """The category of trace op `op` whose HLO scope is `scope` (module docstring)."""
+    if "/evaluate/" in scope:
+        return "evaluation"
+    if "env_step" in scope:
+        return "env step"
+    if "/replay_" in scope:
+        return "replay"
+    if "gradient_steps" in scope or scope.startswith("jit(run)/"):  # the update (alone: jit(run))
+        if op.startswith(("ynn", "dot")):
+            return "update: matmul"
+        inner = scope.split("closed_call/")[-1]
+        if any(s in inner for s in NETWORK_SCOPES):
+            return "update: networks and losses"
+        if "jvp" not in inner and inner.split("/")[-1] in OPTIMIZER_OPS:  # outside the gradients
+            return "update: optimizer and targets"
+        return "update: other"
+    return "acting and bookkeeping"
 
 
-def trace_ops(run: object, args: tuple, trace_dir: str) -> list[dict]:
-    """Complete ('X') events of one traced call of `run(*args)`."""
+def trace_ops(call: Callable[[], object], trace_dir: str) -> list[dict]:
+    """Complete ('X') events of one traced `call()`."""
     with jax.profiler.trace(trace_dir, create_perfetto_trace=True):
-        jax.block_until_ready(run(*args))
+        jax.block_until_ready(call())
     path = next(Path(trace_dir).rglob("perfetto_trace.json.gz"))
     events = json.load(gzip.open(path))
     events = events["traceEvents"] if isinstance(events, dict) else events
     return [e for e in events if e.get("ph") == "X" and "dur" in e]
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seeds", type=int, default=1, help="agents vmapped (1: no vmap)")
-    parser.add_argument("--updates", type=int, default=200, help="scanned updates per call")
-    parser.add_argument("--top", type=int, default=0, help="also list the N costliest ops")
-    args = parser.parse_args()
-    if args.seeds < 1 or args.updates < 1:
-        parser.error(f"--seeds and --updates must be >= 1 (got {args.seeds}, {args.updates})")
-
+def update_program(seeds: int, updates: int) -> tuple[Any, Callable[[], object], int]:
+    """The update alone over `seeds` agents (1: not vmapped): compiled program, one call of it
+    on fixed inputs, and the updates a call makes."""
     cfg = Config(hidden_sizes=bench.PAPER_HIDDEN, batch_size=bench.PAPER_BATCH, **bench.PLAIN_SAC)
     agent, state, batch, weights, hp = bench.agent_and_inputs(
         cfg, bench.HC_OBS_DIM, bench.HC_ACTION_DIM
     )
     key = jax.random.key(3)
-    if args.seeds > 1:
-        stack = lambda x: jax.numpy.broadcast_to(x, (args.seeds, *x.shape))
+    if seeds > 1:
+        stack = lambda x: jnp.broadcast_to(x, (seeds, *x.shape))
         state, batch, weights, hp = jax.tree.map(stack, (state, batch, weights, hp))
-        key = jax.random.split(key, args.seeds)
+        key = jax.random.split(key, seeds)
     call_args = (state, batch, weights, hp, key)
-    run = bench.update_scan(agent, args.updates, args.seeds if args.seeds > 1 else 0)
-    compiled = run.lower(*call_args).compile()
-    jax.block_until_ready(compiled(*call_args))
+    compiled = (
+        bench.update_scan(agent, updates, seeds if seeds > 1 else 0).lower(*call_args).compile()
+    )
+    return compiled, lambda: compiled(*call_args), updates * seeds
+
+
+def trainer_program(num_envs: int, backend: str) -> tuple[Any, Callable[[], object], int]:
+    """The 1-seed trainer after its warm-up period: compiled chunk, one call of it (a period; the
+    state is donated, so each call continues from the last) and the updates a call makes."""
+    sizes = dataclasses.replace(bench.FULL, period_env_steps=2000 if num_envs == 1 else 4000)
+    cfg = bench.trainer_config(sizes, False, num_envs).replace(backend=backend)
+    compiled, state, hps, _ = bench.compile_trainer(make_train(cfg), 1)
+    holder = {"state": compiled(state, hps, jnp.int32(0))[0]}  # the warm-up period
+
+    def call() -> object:
+        holder["state"], metrics = compiled(holder["state"], hps, jnp.int32(1))
+        return metrics
+
+    return compiled, call, cfg.iters_per_eval * cfg.updates_per_iter
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, default=1, help="agents vmapped (1: no vmap)")
+    parser.add_argument("--updates", type=int, default=200, help="scanned updates per call")
+    parser.add_argument(
+        "--trainer",
+        type=int,
+        default=0,
+        metavar="ENVS",
+        help="profile the trainer at ENVS envs instead of the update alone",
+    )
+    parser.add_argument(
+        "--backend",
+        default="mujoco",
+        choices=("mujoco", "mjx"),
+        help="the trainer's physics (default: MuJoCo's C engine)",
+    )
+    parser.add_argument("--top", type=int, default=0, help="also list the N costliest ops")
+    args = parser.parse_args()
+    if args.seeds < 1 or args.updates < 1 or args.trainer < 0:
+        parser.error(
+            f"--seeds and --updates must be >= 1 and --trainer >= 0 "
+            f"(got {args.seeds}, {args.updates}, {args.trainer})"
+        )
+
+    if args.trainer:
+        what = f"the trainer, {args.trainer} env(s), {args.backend} physics, one period"
+        compiled, call, updates = trainer_program(args.trainer, args.backend)
+    else:
+        what = f"the update alone, {args.seeds} agent(s), {args.updates} scanned updates"
+        compiled, call, updates = update_program(args.seeds, args.updates)
+    jax.block_until_ready(call())
     walls = []
-    for _ in range(3):
+    for _ in range(1 if args.trainer else 3):
         start = time.perf_counter()
-        jax.block_until_ready(compiled(*call_args))
+        jax.block_until_ready(call())
         walls.append(time.perf_counter() - start)
-    wall_us = min(walls) / args.updates * 1e6
 
     with tempfile.TemporaryDirectory() as trace_dir:
-        events = trace_ops(compiled, call_args, trace_dir)
+        events = trace_ops(call, trace_dir)
     scopes = op_names(compiled.as_text())
-    skip = ("ThunkExecutor", "$", "Slinky", "PjitFunction")
+    skip = ("ThunkExecutor", "$", "Slinky", "PjitFunction", "CommonPjRt", "ExecuteReplicated")
+    ops = [e for e in events if not e["name"].startswith(skip) and e["name"] in scopes]
+    span_us = max(e["ts"] + e["dur"] for e in ops) - min(e["ts"] for e in ops)
+    per_thread: collections.Counter[int] = collections.Counter()
+    for e in ops:
+        per_thread[e["tid"]] += e["dur"]
+    # The threads doing the work (the runtime's main thread runs a few tiny ops too).
+    threads = sum(us > 0.05 * sum(per_thread.values()) for us in per_thread.values())
     per_op: collections.Counter[str] = collections.Counter()
-    for e in events:
-        if not e["name"].startswith(skip):
-            per_op[e["name"]] += e["dur"] / args.updates
+    for e in ops:
+        per_op[e["name"]] += e["dur"]
     per_cat: collections.Counter[str] = collections.Counter()
     for op, us in per_op.items():
-        per_cat[category(op, scopes.get(op, ""))] += us
-    busy = sum(per_cat.values())
+        per_cat[category(op, scopes[op])] += us
+    capacity = span_us * threads
 
-    print(f"one update, {args.seeds} agent(s) vmapped, B {cfg.batch_size}, {cfg.hidden_sizes}")
-    print(f"wall (untraced, best of 3): {wall_us:8.1f} us per update call")
-    print(f"threads busy (traced):      {busy:8.1f} us  ({busy / wall_us:.2f} x wall)")
-    for name in ("matmul", "networks and losses", "optimizer and targets", "other"):
-        us = per_cat[name]
-        print(f"  {name:24s} {us:8.1f} us  {us / busy:6.1%} of busy time")
+    print(what)
+    print(f"untraced: {min(walls):.3f} s per call, {updates / min(walls):,.1f} updates/s")
+    print(f"traced span {span_us / 1e6:.3f} s on {threads} threads; share of their capacity:")
+    for name, us in per_cat.most_common():
+        print(f"  {name:32s} {us / capacity:6.1%}")
+    print(f"  {'idle':32s} {1 - sum(per_cat.values()) / capacity:6.1%}")
     for op, us in per_op.most_common(args.top):
-        scope = scopes.get(op, "")
-        print(f"  {us:7.1f} us  {category(op, scope):22s} {op[:34]:34s} {scope[-70:]}")
+        scope = scopes[op]
+        print(f"  {us / capacity:6.2%}  {category(op, scope):30s} {op[:28]:28s} {scope[-60:]}")
 
 
 if __name__ == "__main__":

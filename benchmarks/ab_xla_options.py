@@ -1,0 +1,86 @@
+"""A/B of XLA compiler options on the update alone, interleaved in one process.
+
+    python benchmarks/ab_xla_options.py xla_cpu_prefer_vector_width=512 \\
+        xla_cpu_experimental_ynn_fusion_type=LIBRARY_FUSION_TYPE_DOT
+
+Each argument `name=value` is one variant: the benchmark's update-alone program (`bench.update_scan`,
+B 256, 2x256, HalfCheetah's shapes) compiled with `train.compiler_options()` plus that option, beside
+the baseline with `train.compiler_options()` alone. All variants are compiled first, then their calls
+alternate for `--rounds` rounds, so the VM's drift (benchmarks/README.md) touches every variant alike.
+Printed per variant: whether its losses and final state are bit-identical to the baseline's, its
+median updates/s and its ratio to the baseline (above 1: faster). Values `true`/`false` are booleans,
+digits integers, anything else a string (enum options take the proto's names, as above).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import bench  # noqa: E402
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+
+from arld_jax.config import Config  # noqa: E402
+
+
+def parse_option(text: str) -> tuple[str, bool | int | str]:
+    """'name=value' -> (name, value as bool, int or str)."""
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"expected name=value, got {text!r}")
+    if value in ("true", "false"):
+        return name, value == "true"
+    return name, int(value) if value.isdigit() else value
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("options", nargs="+", type=parse_option, help="name=value, one per variant")
+    parser.add_argument("--rounds", type=int, default=8, help="timed calls per variant")
+    parser.add_argument("--updates", type=int, default=100, help="scanned updates per call")
+    args = parser.parse_args()
+
+    cfg = Config(hidden_sizes=bench.PAPER_HIDDEN, batch_size=bench.PAPER_BATCH, **bench.PLAIN_SAC)
+    agent, state, batch, weights, hp = bench.agent_and_inputs(
+        cfg, bench.HC_OBS_DIM, bench.HC_ACTION_DIM
+    )
+    call_args = (state, batch, weights, hp, jax.random.key(3))
+    variants = {"baseline": {}} | {f"{k}={v}": {k: v} for k, v in args.options}
+    compiled = {}
+    for name, option in variants.items():
+        try:
+            program = bench.update_scan(agent, args.updates, extra_options=option)
+            compiled[name] = program.lower(*call_args).compile()
+        except Exception as e:  # noqa: BLE001 (an unknown option or value: report it, go on)
+            print(f"{name}: not compiled: {str(e).splitlines()[0][:200]}")
+    reference = jax.tree.leaves(compiled["baseline"](*call_args))
+    identical = {
+        name: all(
+            np.array_equal(a, b)
+            for a, b in zip(reference, jax.tree.leaves(fn(*call_args)), strict=True)
+        )
+        for name, fn in compiled.items()
+    }
+    times: dict[str, list[float]] = {name: [] for name in compiled}
+    for _ in range(args.rounds):
+        for name, fn in compiled.items():
+            start = time.perf_counter()
+            jax.block_until_ready(fn(*call_args))
+            times[name].append(time.perf_counter() - start)
+    base = statistics.median(times["baseline"])
+    width = max(len(name) for name in times)
+    print(f"{'variant':{width}s}  {'bit-identical':>13s}  {'updates/s':>9s}  {'vs baseline':>11s}")
+    for name, ts in times.items():
+        median = statistics.median(ts)
+        rate, ratio = args.updates / median, base / median
+        print(f"{name:{width}s}  {identical[name]!s:>13s}  {rate:9.1f}  {ratio:11.3f}")
+
+
+if __name__ == "__main__":
+    main()
