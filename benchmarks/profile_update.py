@@ -98,6 +98,18 @@ def trace_ops(call: Callable[[], object], trace_dir: str) -> list[dict]:
     return [e for e in events if e.get("ph") == "X" and "dur" in e]
 
 
+def ops_running(ops: list[dict]) -> list[float]:
+    """Share of the ops' span during which exactly 0, 1, 2, ... ops run at once (any threads)."""
+    edges = sorted((t, step) for e in ops for t, step in ((e["ts"], 1), (e["ts"] + e["dur"], -1)))
+    time_at: collections.Counter[int] = collections.Counter()
+    running, last = 0, edges[0][0]
+    for t, step in edges:
+        time_at[running] += t - last
+        running, last = running + step, t
+    total = sum(time_at.values())
+    return [time_at[n] / total for n in range(max(time_at) + 1)]
+
+
 def update_program(seeds: int, updates: int) -> tuple[Any, Callable[[], object], int]:
     """The update alone over `seeds` agents (1: not vmapped): compiled program, one call of it
     on fixed inputs, and the updates a call makes."""
@@ -174,7 +186,8 @@ def main() -> None:
         events = trace_ops(call, trace_dir)
     scopes = op_names(compiled.as_text())
     skip = ("ThunkExecutor", "$", "Slinky", "PjitFunction", "CommonPjRt", "ExecuteReplicated")
-    ops = [e for e in events if not e["name"].startswith(skip) and e["name"] in scopes]
+    # Loop ops (`while`) are left out: their events can span their bodies' ops.
+    ops = [e for e in events if e["name"] in scopes and not e["name"].startswith(skip + ("while",))]
     span_us = max(e["ts"] + e["dur"] for e in ops) - min(e["ts"] for e in ops)
     per_thread: collections.Counter[int] = collections.Counter()
     for e in ops:
@@ -195,6 +208,11 @@ def main() -> None:
     for name, us in per_cat.most_common():
         print(f"  {name:32s} {us / capacity:6.1%}")
     print(f"  {'idle':32s} {1 - sum(per_cat.values()) / capacity:6.1%}")
+    running = ops_running(ops)
+    print(
+        "share of the span with 0, 1, 2, ... ops running at once: "
+        + ", ".join(f"{n}: {share:.1%}" for n, share in enumerate(running))
+    )
     for op, us in per_op.most_common(args.top):
         scope = scopes[op]
         print(f"  {us / capacity:6.2%}  {category(op, scope):30s} {op[:28]:28s} {scope[-60:]}")
