@@ -6,9 +6,11 @@
 Each argument `name=value` is one variant: the benchmark's update-alone program (`bench.update_scan`,
 B 256, 2x256, HalfCheetah's shapes) compiled with `train.compiler_options()` plus that option, beside
 the baseline with `train.compiler_options()` alone. All variants are compiled first, then their calls
-alternate for `--rounds` rounds, so the VM's drift (benchmarks/README.md) touches every variant alike.
-Printed per variant: whether its losses and final state are bit-identical to the baseline's, its
-median updates/s and its ratio to the baseline (above 1: faster). Values `true`/`false` are booleans,
+alternate for `--rounds` rounds (each round starting one variant later), so the VM's drift (benchmarks/README.md) touches every variant alike.
+Printed per variant: whether XLA optimized the update to the same HLO as the baseline's (header
+line aside; an option can still change the machine code, as the vector width does, and a variant
+that changes nothing still times differently, which shows the A/B's noise), whether its losses and final state are bit-identical to the baseline's, its median
+updates/s and its ratio to the baseline (above 1: faster). Values `true`/`false` are booleans,
 digits integers, anything else a string (enum options take the proto's names, as above).
 """
 
@@ -59,6 +61,8 @@ def main() -> None:
             compiled[name] = program.lower(*call_args).compile()
         except Exception as e:  # noqa: BLE001 (an unknown option or value: report it, go on)
             print(f"{name}: not compiled: {str(e).splitlines()[0][:200]}")
+    body = lambda fn: fn.as_text().splitlines()[1:]  # the optimized HLO, without its header line
+    same_hlo = {name: body(fn) == body(compiled["baseline"]) for name, fn in compiled.items()}
     reference = jax.tree.leaves(compiled["baseline"](*call_args))
     identical = {
         name: all(
@@ -68,18 +72,22 @@ def main() -> None:
         for name, fn in compiled.items()
     }
     times: dict[str, list[float]] = {name: [] for name in compiled}
-    for _ in range(args.rounds):
-        for name, fn in compiled.items():
+    names = list(compiled)
+    for r in range(args.rounds):  # each round starts one variant later: no fixed position
+        for name in names[r % len(names) :] + names[: r % len(names)]:
+            fn = compiled[name]
             start = time.perf_counter()
             jax.block_until_ready(fn(*call_args))
             times[name].append(time.perf_counter() - start)
     base = statistics.median(times["baseline"])
     width = max(len(name) for name in times)
-    print(f"{'variant':{width}s}  {'bit-identical':>13s}  {'updates/s':>9s}  {'vs baseline':>11s}")
+    head = f"{'variant':{width}s}  {'same HLO':>8s}  {'bit-identical':>13s}"
+    print(f"{head}  {'updates/s':>9s}  {'vs baseline':>11s}")
     for name, ts in times.items():
         median = statistics.median(ts)
         rate, ratio = args.updates / median, base / median
-        print(f"{name:{width}s}  {identical[name]!s:>13s}  {rate:9.1f}  {ratio:11.3f}")
+        row = f"{name:{width}s}  {same_hlo[name]!s:>8s}  {identical[name]!s:>13s}"
+        print(f"{row}  {rate:9.1f}  {ratio:11.3f}")
 
 
 if __name__ == "__main__":
