@@ -3,15 +3,17 @@
     python benchmarks/ab_xla_options.py xla_cpu_prefer_vector_width=512 \\
         xla_cpu_experimental_ynn_fusion_type=LIBRARY_FUSION_TYPE_DOT
 
-Each argument `name=value` is one variant: the benchmark's update-alone program (`bench.update_scan`,
+Each argument `name=value` is one variant: the benchmark's update-alone program (`bench.update_call`,
 B 256, 2x256, HalfCheetah's shapes) compiled with `train.compiler_options()` plus that option, beside
 the baseline with `train.compiler_options()` alone. All variants are compiled first, then their calls
-alternate for `--rounds` rounds (each round starting one variant later), so the VM's drift (benchmarks/README.md) touches every variant alike.
-Printed per variant: whether XLA optimized the update to the same HLO as the baseline's (header
-line aside; an option can still change the machine code, as the vector width does, and a variant
-that changes nothing still times differently, which shows the A/B's noise), whether its losses and final state are bit-identical to the baseline's, its median
-updates/s and its ratio to the baseline (above 1: faster). Values `true`/`false` are booleans,
-digits integers, anything else a string (enum options take the proto's names, as above).
+alternate for `--rounds` rounds, each round starting one variant later, so the VM's drift
+(benchmarks/README.md) touches every variant alike. Printed per variant: whether XLA optimized the
+update to the same HLO as the baseline's (header line aside; an option can still change the machine
+code, as the vector width does, and a variant that changes nothing still times differently, which
+shows the A/B's noise), whether the critic losses of its first call are bit-identical to the
+baseline's, its median updates/s and its ratio to the baseline (above 1: faster). Values
+`true`/`false` are booleans, digits integers, anything else a string (enum options take the proto's
+names, as above).
 """
 
 from __future__ import annotations
@@ -49,35 +51,25 @@ def main() -> None:
     args = parser.parse_args()
 
     cfg = Config(hidden_sizes=bench.PAPER_HIDDEN, batch_size=bench.PAPER_BATCH, **bench.PLAIN_SAC)
-    agent, state, batch, weights, hp = bench.agent_and_inputs(
-        cfg, bench.HC_OBS_DIM, bench.HC_ACTION_DIM
-    )
-    call_args = (state, batch, weights, hp, jax.random.key(3))
     variants = {"baseline": {}} | {f"{k}={v}": {k: v} for k, v in args.options}
-    compiled = {}
+    calls, compiled = {}, {}
     for name, option in variants.items():
         try:
-            program = bench.update_scan(agent, args.updates, extra_options=option)
-            compiled[name] = program.lower(*call_args).compile()
+            calls[name], compiled[name] = bench.update_call(
+                cfg, bench.HC_OBS_DIM, bench.HC_ACTION_DIM, args.updates, extra_options=option
+            )
         except Exception as e:  # noqa: BLE001 (an unknown option or value: report it, go on)
             print(f"{name}: not compiled: {str(e).splitlines()[0][:200]}")
     body = lambda fn: fn.as_text().splitlines()[1:]  # the optimized HLO, without its header line
     same_hlo = {name: body(fn) == body(compiled["baseline"]) for name, fn in compiled.items()}
-    reference = jax.tree.leaves(compiled["baseline"](*call_args))
-    identical = {
-        name: all(
-            np.array_equal(a, b)
-            for a, b in zip(reference, jax.tree.leaves(fn(*call_args)), strict=True)
-        )
-        for name, fn in compiled.items()
-    }
+    first = {name: np.asarray(call()) for name, call in calls.items()}  # from the same start
+    identical = {name: np.array_equal(losses, first["baseline"]) for name, losses in first.items()}
     times: dict[str, list[float]] = {name: [] for name in compiled}
     names = list(compiled)
     for r in range(args.rounds):  # each round starts one variant later: no fixed position
         for name in names[r % len(names) :] + names[: r % len(names)]:
-            fn = compiled[name]
             start = time.perf_counter()
-            jax.block_until_ready(fn(*call_args))
+            jax.block_until_ready(calls[name]())
             times[name].append(time.perf_counter() - start)
     base = statistics.median(times["baseline"])
     width = max(len(name) for name in times)

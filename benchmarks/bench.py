@@ -584,28 +584,44 @@ def update_scan(
     return jax.jit(jax.vmap(run) if num_seeds else run, compiler_options=options)
 
 
+def update_call(
+    cfg: Config,
+    obs_dim: int,
+    action_dim: int,
+    num_updates: int,
+    num_seeds: int = 1,
+    extra_options: dict | None = None,
+) -> tuple[Callable[[], Any], Any]:
+    """The update-alone program of `cfg` (`update_scan`, compiled) and a call of it that continues
+    from the last call's agents. `num_seeds` > 1 vmaps it over that many agents, one program as in
+    a seed sweep (1: the unvmapped single-run program, as `train.over_runs` runs one seed); every
+    agent starts from the same state and batch, each with its own key."""
+    agent, state, batch, weights, hp = agent_and_inputs(cfg, obs_dim, action_dim)
+    key = jax.random.key(3)
+    if num_seeds > 1:
+        seeds = lambda x: jnp.broadcast_to(x, (num_seeds, *x.shape))
+        state, batch, weights, hp = jax.tree.map(seeds, (state, batch, weights, hp))
+        key = jax.random.split(key, num_seeds)
+    run = update_scan(agent, num_updates, num_seeds if num_seeds > 1 else 0, extra_options)
+    compiled = run.lower(state, batch, weights, hp, key).compile()
+    holder = {"state": state}
+
+    def call() -> Any:
+        holder["state"], losses = compiled(holder["state"], batch, weights, hp, key)
+        return losses
+
+    return call, compiled
+
+
 def updates_per_s(b: Bench, cfg: Config, obs_dim: int, action_dim: int, num_seeds: int = 1) -> dict:
-    """Update-only updates/s (all seeds together) of `cfg`'s agent; `num_seeds` > 1 vmaps the
-    update over that many agents, one program as in a seed sweep (1: the unvmapped single-run
-    program, as `train.over_runs` runs one seed). Memoized on the shapes, dtype and seeds."""
+    """Update-only updates/s (all seeds together) of `cfg`'s agent over `num_seeds` vmapped agents
+    (`update_call`). Memoized on the shapes, dtype and seeds."""
     memo_key = (
         "update", obs_dim, action_dim, cfg.hidden_sizes, cfg.batch_size, cfg.matmul_dtype,
         cfg.noisy_runs, num_seeds,
     )  # fmt: skip
     if memo_key not in b.memo:
-        agent, state, batch, weights, hp = agent_and_inputs(cfg, obs_dim, action_dim)
-        key = jax.random.key(3)
-        if num_seeds > 1:
-            seeds = lambda x: jnp.broadcast_to(x, (num_seeds, *x.shape))
-            state, batch, weights, hp = jax.tree.map(seeds, (state, batch, weights, hp))
-            key = jax.random.split(key, num_seeds)
-        run = update_scan(agent, b.sizes.updates, num_seeds if num_seeds > 1 else 0)
-        holder = {"state": state}
-
-        def call() -> Any:
-            holder["state"], losses = run(holder["state"], batch, weights, hp, key)
-            return losses
-
+        call, _ = update_call(cfg, obs_dim, action_dim, b.sizes.updates, num_seeds)
         times = time_calls(call, b.sizes.repeats)
         b.memo[memo_key] = summarize(times) | {
             "matmul_dtype": cfg.matmul_dtype,
@@ -675,18 +691,11 @@ def interleaved_fraction(b: Bench) -> dict:
     cfg = Config(hidden_sizes=PAPER_HIDDEN, batch_size=PAPER_BATCH, **PLAIN_SAC)
     flops = analytic_update_flops(HC_OBS_DIM, HC_ACTION_DIM, cfg.hidden_sizes, cfg.batch_size)
     chains = [matmul_call(b.sizes, e, jnp.float32) for e in (1, 8)]
-    agent, state, batch, weights, hp = agent_and_inputs(cfg, HC_OBS_DIM, HC_ACTION_DIM)
-    run = update_scan(agent, b.sizes.updates)
-    holder = {"state": state}
-
-    def update_call() -> Any:
-        holder["state"], losses = run(holder["state"], batch, weights, hp, jax.random.key(3))
-        return losses
-
+    update, _ = update_call(cfg, HC_OBS_DIM, HC_ACTION_DIM, b.sizes.updates)
     fractions = []
     for _ in range(2 * b.sizes.repeats):
         gflops = max(flop / 1e9 / min(time_calls(call, 1)) for call, flop in chains)
-        updates_per_s = b.sizes.updates / time_calls(update_call, 1)[0]
+        updates_per_s = b.sizes.updates / time_calls(update, 1)[0]
         fractions.append(updates_per_s / (gflops * 1e9 / flops["total"]))
     return {
         "fraction_of_limit_interleaved": statistics.median(fractions),

@@ -114,19 +114,8 @@ def update_program(seeds: int, updates: int) -> tuple[Any, Callable[[], object],
     """The update alone over `seeds` agents (1: not vmapped): compiled program, one call of it
     on fixed inputs, and the updates a call makes."""
     cfg = Config(hidden_sizes=bench.PAPER_HIDDEN, batch_size=bench.PAPER_BATCH, **bench.PLAIN_SAC)
-    agent, state, batch, weights, hp = bench.agent_and_inputs(
-        cfg, bench.HC_OBS_DIM, bench.HC_ACTION_DIM
-    )
-    key = jax.random.key(3)
-    if seeds > 1:
-        stack = lambda x: jnp.broadcast_to(x, (seeds, *x.shape))
-        state, batch, weights, hp = jax.tree.map(stack, (state, batch, weights, hp))
-        key = jax.random.split(key, seeds)
-    call_args = (state, batch, weights, hp, key)
-    compiled = (
-        bench.update_scan(agent, updates, seeds if seeds > 1 else 0).lower(*call_args).compile()
-    )
-    return compiled, lambda: compiled(*call_args), updates * seeds
+    call, compiled = bench.update_call(cfg, bench.HC_OBS_DIM, bench.HC_ACTION_DIM, updates, seeds)
+    return compiled, call, updates * seeds
 
 
 def trainer_program(num_envs: int, backend: str) -> tuple[Any, Callable[[], object], int]:
