@@ -29,12 +29,14 @@ A timing, so run it on a quiet machine and read the shares, not the microseconds
 from __future__ import annotations
 
 import argparse
+import bisect
 import collections
 import dataclasses
 import gzip
 import json
 import os
 import re
+import statistics
 import sys
 import tempfile
 import time
@@ -96,6 +98,27 @@ def trace_ops(call: Callable[[], object], trace_dir: str) -> list[dict]:
     events = json.load(gzip.open(path))
     events = events["traceEvents"] if isinstance(events, dict) else events
     return [e for e in events if e.get("ph") == "X" and "dur" in e]
+
+
+def alone_or_beside(ops: list[dict]) -> list[str]:
+    """For each op: 'alone' when other threads' ops cover < 20% of its time, 'beside' when they
+    cover > 80%, else ''. A library may run an op's work on other threads without trace events,
+    so an op that gets the second core when alone runs faster alone than beside another op."""
+    order = sorted(range(len(ops)), key=lambda i: ops[i]["ts"])
+    starts = [ops[i]["ts"] for i in order]
+    longest = max(e["dur"] for e in ops)
+    labels = [""] * len(ops)
+    for i in order:
+        e = ops[i]
+        lo, hi = e["ts"], e["ts"] + e["dur"]
+        covered = 0.0
+        for j in order[bisect.bisect_left(starts, lo - longest) : bisect.bisect_right(starts, hi)]:
+            o = ops[j]
+            if o["tid"] != e["tid"]:
+                covered += max(0.0, min(hi, o["ts"] + o["dur"]) - max(lo, o["ts"]))
+        share = covered / max(e["dur"], 1e-9)
+        labels[i] = "alone" if share < 0.2 else "beside" if share > 0.8 else ""
+    return labels
 
 
 def ops_running(ops: list[dict]) -> list[float]:
@@ -202,6 +225,20 @@ def main() -> None:
         "share of the span with 0, 1, 2, ... ops running at once: "
         + ", ".join(f"{n}: {share:.1%}" for n, share in enumerate(running))
     )
+    durations: dict[str, dict[str, list[float]]] = collections.defaultdict(
+        lambda: collections.defaultdict(list)
+    )
+    for e, label in zip(ops, alone_or_beside(ops), strict=True):
+        if label and category(e["name"], scopes[e["name"]]) == "update: matmul":
+            durations[e["name"]][label].append(e["dur"])
+    heavy = [op for op, _ in per_op.most_common() if op in durations][:12]
+    rows = [
+        f"{op} {statistics.median(durations[op]['alone']):.0f} / "
+        f"{statistics.median(durations[op]['beside']):.0f}"
+        for op in heavy
+        if durations[op]["alone"] and durations[op]["beside"]
+    ]
+    print("costliest matmuls, median us alone / with another op beside: " + "; ".join(rows))
     for op, us in per_op.most_common(args.top):
         scope = scopes[op]
         print(f"  {us / capacity:6.2%}  {category(op, scope):30s} {op[:28]:28s} {scope[-60:]}")
