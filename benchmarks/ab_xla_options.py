@@ -30,8 +30,6 @@ import bench  # noqa: E402
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from arld_jax.config import Config  # noqa: E402
-
 
 def parse_option(text: str) -> tuple[str, bool | int | str]:
     """'name=value' -> (name, value as bool, int or str)."""
@@ -50,7 +48,7 @@ def main() -> None:
     parser.add_argument("--updates", type=int, default=100, help="scanned updates per call")
     args = parser.parse_args()
 
-    cfg = Config(hidden_sizes=bench.PAPER_HIDDEN, batch_size=bench.PAPER_BATCH, **bench.PLAIN_SAC)
+    cfg = bench.PAPER_UPDATE
     variants = {"baseline": {}} | {f"{k}={v}": {k: v} for k, v in args.options}
     calls, compiled = {}, {}
     for name, option in variants.items():

@@ -81,6 +81,11 @@ SAC run (`Sweep.program_config`: no actor weight-noise draws). The update sectio
 program that draws them (a sweep with a Noisy SAC cell)."""
 
 
+PAPER_UPDATE = Config(hidden_sizes=PAPER_HIDDEN, batch_size=PAPER_BATCH, **PLAIN_SAC)
+"""The update every update-only figure times: B 256, 2x256, f32, plain SAC (HalfCheetah's shapes
+come with HC_OBS_DIM, HC_ACTION_DIM)."""
+
+
 @dataclass(frozen=True)
 class Sizes:
     """How much work each section does (full run or --quick)."""
@@ -433,7 +438,7 @@ def agent_and_inputs(
 
 def section_flops(b: Bench) -> dict:
     """FLOPs of one SAC update at B=256, 2x256 (obs 17, action 6), and the updates/s it allows."""
-    cfg = Config(hidden_sizes=PAPER_HIDDEN, batch_size=PAPER_BATCH, **PLAIN_SAC)
+    cfg = PAPER_UPDATE
     agent, state, batch, weights, hp = agent_and_inputs(cfg, HC_OBS_DIM, HC_ACTION_DIM)
     indices = jnp.arange(weights.shape[0])
     lowered = jax.jit(agent.update).lower(state, batch, weights, indices, hp, jax.random.key(1))
@@ -469,11 +474,14 @@ def section_flops(b: Bench) -> dict:
     return out
 
 
-def limit_updates_per_s(b: Bench, cfg: Config, obs_dim: int, action_dim: int) -> float:
-    """Physical limit of `cfg`'s update (its own sizes) at the measured 256-wide matmul rate."""
+def limit_updates_per_s(
+    b: Bench, cfg: Config, obs_dim: int, action_dim: int, gflops: float | None = None
+) -> float:
+    """Physical limit of `cfg`'s update (its own sizes) at the measured 256-wide matmul rate
+    (`gflops` when given, else the matmul section's, `matmul_gflops`)."""
     dtype_name = "bfloat16" if cfg.matmul_dtype == "bfloat16" else "float32"
     flops = analytic_update_flops(obs_dim, action_dim, cfg.hidden_sizes, cfg.batch_size)["total"]
-    return matmul_gflops(b, dtype_name) * 1e9 / flops
+    return (gflops or matmul_gflops(b, dtype_name)) * 1e9 / flops
 
 
 # ---------------------------------------------------------------- 3. env-only
@@ -567,10 +575,10 @@ def section_env(b: Bench) -> dict:
 
 
 def update_scan(
-    agent: Agent, num_updates: int, num_seeds: int = 0, extra_options: dict | None = None
+    agent: Agent, num_updates: int, vmapped: bool = False, extra_options: dict | None = None
 ) -> Callable[..., Any]:
-    """Jitted lax.scan of `num_updates` SAC updates on one fixed batch. With `num_seeds` > 0 it is
-    vmapped over that many agents (every input with a leading seed axis), as in a seed sweep.
+    """Jitted lax.scan of `num_updates` SAC updates on one fixed batch; `vmapped`: over agents
+    (every input with a leading seed axis), as in a seed sweep.
     `extra_options` are XLA options added to `compiler_options()` (`ab_xla_options.py`)."""
 
     def run(state: Any, batch: Transition, weights: jax.Array, hp: Any, key: jax.Array) -> Any:
@@ -581,7 +589,7 @@ def update_scan(
         return jax.lax.scan(body, state, jax.random.split(key, num_updates))
 
     options = compiler_options() | (extra_options or {})
-    return jax.jit(jax.vmap(run) if num_seeds else run, compiler_options=options)
+    return jax.jit(jax.vmap(run) if vmapped else run, compiler_options=options)
 
 
 def update_call(
@@ -602,7 +610,7 @@ def update_call(
         seeds = lambda x: jnp.broadcast_to(x, (num_seeds, *x.shape))
         state, batch, weights, hp = jax.tree.map(seeds, (state, batch, weights, hp))
         key = jax.random.split(key, num_seeds)
-    run = update_scan(agent, num_updates, num_seeds if num_seeds > 1 else 0, extra_options)
+    run = update_scan(agent, num_updates, num_seeds > 1, extra_options)
     compiled = run.lower(state, batch, weights, hp, key).compile()
     holder = {"state": state}
 
@@ -613,15 +621,30 @@ def update_call(
     return call, compiled
 
 
+def update_memo_key(cfg: Config, obs_dim: int, action_dim: int, num_seeds: int) -> tuple:
+    """What makes one update-only program: the shapes, dtype, noise draws and seeds."""
+    return (
+        obs_dim, action_dim, cfg.hidden_sizes, cfg.batch_size, cfg.matmul_dtype, cfg.noisy_runs,
+        num_seeds,
+    )  # fmt: skip
+
+
+def bench_update_call(
+    b: Bench, cfg: Config, obs_dim: int, action_dim: int, num_seeds: int = 1
+) -> Callable[[], Any]:
+    """`update_call` of `b.sizes.updates` updates, compiled once per benchmark run."""
+    memo_key = ("update_call", *update_memo_key(cfg, obs_dim, action_dim, num_seeds))
+    if memo_key not in b.memo:
+        b.memo[memo_key] = update_call(cfg, obs_dim, action_dim, b.sizes.updates, num_seeds)[0]
+    return b.memo[memo_key]
+
+
 def updates_per_s(b: Bench, cfg: Config, obs_dim: int, action_dim: int, num_seeds: int = 1) -> dict:
     """Update-only updates/s (all seeds together) of `cfg`'s agent over `num_seeds` vmapped agents
     (`update_call`). Memoized on the shapes, dtype and seeds."""
-    memo_key = (
-        "update", obs_dim, action_dim, cfg.hidden_sizes, cfg.batch_size, cfg.matmul_dtype,
-        cfg.noisy_runs, num_seeds,
-    )  # fmt: skip
+    memo_key = ("update", *update_memo_key(cfg, obs_dim, action_dim, num_seeds))
     if memo_key not in b.memo:
-        call, _ = update_call(cfg, obs_dim, action_dim, b.sizes.updates, num_seeds)
+        call = bench_update_call(b, cfg, obs_dim, action_dim, num_seeds)
         times = time_calls(call, b.sizes.repeats)
         b.memo[memo_key] = summarize(times) | {
             "matmul_dtype": cfg.matmul_dtype,
@@ -641,12 +664,7 @@ def section_update(b: Bench) -> dict:
         "float32, noise draws (Noisy SAC program)": ("float32", True),
     }
     for name, (dtype_name, noisy_runs) in variants.items():
-        cfg = Config(
-            hidden_sizes=PAPER_HIDDEN,
-            batch_size=PAPER_BATCH,
-            matmul_dtype=dtype_name,
-            noisy_runs=noisy_runs,
-        )
+        cfg = PAPER_UPDATE.replace(matmul_dtype=dtype_name, noisy_runs=noisy_runs)
         r = updates_per_s(b, cfg, HC_OBS_DIM, HC_ACTION_DIM)
         limit = limit_updates_per_s(b, cfg, HC_OBS_DIM, HC_ACTION_DIM)
         out[name] = r | {
@@ -688,15 +706,14 @@ def interleaved_fraction(b: Bench) -> dict:
     chains and then one update call, and divides that round's update rate by that round's limit
     (the better chain's GFLOP/s, as `matmul_gflops`, over the analytic FLOPs); the median over
     rounds is reported, with every round's fraction."""
-    cfg = Config(hidden_sizes=PAPER_HIDDEN, batch_size=PAPER_BATCH, **PLAIN_SAC)
-    flops = analytic_update_flops(HC_OBS_DIM, HC_ACTION_DIM, cfg.hidden_sizes, cfg.batch_size)
     chains = [matmul_call(b.sizes, e, jnp.float32) for e in (1, 8)]
-    update, _ = update_call(cfg, HC_OBS_DIM, HC_ACTION_DIM, b.sizes.updates)
+    update = bench_update_call(b, PAPER_UPDATE, HC_OBS_DIM, HC_ACTION_DIM)
     fractions = []
     for _ in range(2 * b.sizes.repeats):
         gflops = max(flop / 1e9 / min(time_calls(call, 1)) for call, flop in chains)
         updates_per_s = b.sizes.updates / time_calls(update, 1)[0]
-        fractions.append(updates_per_s / (gflops * 1e9 / flops["total"]))
+        limit = limit_updates_per_s(b, PAPER_UPDATE, HC_OBS_DIM, HC_ACTION_DIM, gflops)
+        fractions.append(updates_per_s / limit)
     return {
         "fraction_of_limit_interleaved": statistics.median(fractions),
         "fractions_interleaved": fractions,
@@ -781,10 +798,12 @@ def time_periods(trainer: Trainer, num_seeds: int, max_timed: int) -> dict:
     }
 
 
-def trainer_run(b: Bench, num_envs: int, num_seeds: int, update_before_add: bool = False) -> dict:
-    """Timed trainer periods of the section's config (memoized: seeds reuses trainer's 1 x 1).
-
-    One seed times `timed_periods` periods; more seeds (N times the work) time one."""
+def trainer_and_run(
+    b: Bench, num_envs: int, num_seeds: int, update_before_add: bool = False
+) -> tuple[Trainer, dict]:
+    """The trainer of the section's config and its timed periods (memoized: seeds reuses
+    trainer's 1 x 1). One seed times `timed_periods` periods; more seeds (N times the work) time
+    one."""
     memo_key = ("trainer", num_envs, num_seeds) + (
         ("update_before_add",) if update_before_add else ()
     )
@@ -793,7 +812,12 @@ def trainer_run(b: Bench, num_envs: int, num_seeds: int, update_before_add: bool
         trainer = make_train(cfg)
         max_timed = b.sizes.timed_periods if num_seeds == 1 else 1
         b.memo[memo_key] = (trainer, time_periods(trainer, num_seeds, max_timed))
-    return b.memo[memo_key][1]
+    return b.memo[memo_key]
+
+
+def trainer_run(b: Bench, num_envs: int, num_seeds: int, update_before_add: bool = False) -> dict:
+    """Timed trainer periods of the section's config (`trainer_and_run`)."""
+    return trainer_and_run(b, num_envs, num_seeds, update_before_add)[1]
 
 
 def replay_scan(
@@ -898,8 +922,7 @@ def section_trainer(b: Bench) -> dict:
     """The full trainer at 1 env (paper) and 16 envs, 1 update per env step, one period timed."""
     out = {}
     for num_envs in (1, 16):
-        timing = trainer_run(b, num_envs, 1)
-        trainer = b.memo[("trainer", num_envs, 1)][0]
+        trainer, timing = trainer_and_run(b, num_envs, 1)
         cfg = trainer.cfg
         breakdown = period_breakdown(b, trainer, timing)
         eval_s = breakdown["seconds"]["evaluation"]
@@ -1039,7 +1062,7 @@ def section_seeds(b: Bench) -> dict:
     the update alone's, and `update_ceiling_on_speedup` = (update alone, N seeds) / (trainer, 1
     seed) bounds the trainer's speedup in the same run."""
     runs = {n: trainer_run(b, 1, n) for n in b.sizes.seed_counts}
-    trainer = b.memo[("trainer", 1, b.sizes.seed_counts[0])][0]
+    trainer = trainer_and_run(b, 1, b.sizes.seed_counts[0])[0]
     alone = {
         n: updates_per_s(b, trainer.cfg, trainer.obs_dim, trainer.action_dim, n)
         for n in b.sizes.seed_counts
@@ -1513,8 +1536,7 @@ def section_peers(b: Bench) -> dict:
     limit = float("nan")
     matmul = b.report["sections"].get("matmul", {})
     if "float32_e1" in matmul:  # only when the matmul section ran in this process
-        cfg = Config(hidden_sizes=PAPER_HIDDEN, batch_size=PAPER_BATCH, **PLAIN_SAC)
-        limit = limit_updates_per_s(b, cfg, HC_OBS_DIM, HC_ACTION_DIM)
+        limit = limit_updates_per_s(b, PAPER_UPDATE, HC_OBS_DIM, HC_ACTION_DIM)
     out["limit_updates_per_s_f32"] = limit
     for num_envs in ps.env_counts:
         log(f"(peers, {num_envs} env(s): Brax SAC in {venv['path']} ...)")

@@ -5,7 +5,7 @@
     python benchmarks/profile_update.py --trainer 1          # the trainer, 1 env, C physics
     python benchmarks/profile_update.py --trainer 16 --backend mjx --top 40
 
-The update alone is the benchmark's program (`bench.update_scan`, on a fixed batch, HalfCheetah's
+The update alone is the benchmark's program (`bench.update_call`, on a fixed batch, HalfCheetah's
 shapes); the trainer is `bench.trainer_config` at the paper's sizes (1 update per env step, periods of
 2,000 env steps, one evaluation episode), compiled as the driver does (`bench.compile_trainer`). The
 script times untraced calls, then traces one call with `jax.profiler` and XLA:CPU's per-op events
@@ -53,7 +53,6 @@ import bench  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
-from arld_jax.config import Config  # noqa: E402
 from arld_jax.train import make_train  # noqa: E402
 
 NETWORK_SCOPES = ("Actor", "Critic", "softplus", "_normal", "tanh", "log", "exp", "reduce_sum")
@@ -136,7 +135,7 @@ def ops_running(ops: list[dict]) -> list[float]:
 def update_program(seeds: int, updates: int) -> tuple[Any, Callable[[], object], int]:
     """The update alone over `seeds` agents (1: not vmapped): compiled program, one call of it
     on fixed inputs, and the updates a call makes."""
-    cfg = Config(hidden_sizes=bench.PAPER_HIDDEN, batch_size=bench.PAPER_BATCH, **bench.PLAIN_SAC)
+    cfg = bench.PAPER_UPDATE
     call, compiled = bench.update_call(cfg, bench.HC_OBS_DIM, bench.HC_ACTION_DIM, updates, seeds)
     return compiled, call, updates * seeds
 
@@ -197,9 +196,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as trace_dir:
         events = trace_ops(call, trace_dir)
     scopes = op_names(compiled.as_text())
-    skip = ("ThunkExecutor", "$", "Slinky", "PjitFunction", "CommonPjRt", "ExecuteReplicated")
     # Loop ops (`while`) are left out: their events can span their bodies' ops.
-    ops = [e for e in events if e["name"] in scopes and not e["name"].startswith(skip + ("while",))]
+    ops = [e for e in events if e["name"] in scopes and not e["name"].startswith("while")]
     span_us = max(e["ts"] + e["dur"] for e in ops) - min(e["ts"] for e in ops)
     per_thread: collections.Counter[int] = collections.Counter()
     for e in ops:
