@@ -21,13 +21,11 @@ from __future__ import annotations
 import argparse
 import statistics
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import bench  # noqa: E402
-import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
 
@@ -62,13 +60,7 @@ def main() -> None:
     same_hlo = {name: body(fn) == body(compiled["baseline"]) for name, fn in compiled.items()}
     first = {name: np.asarray(call()) for name, call in calls.items()}  # from the same start
     identical = {name: np.array_equal(losses, first["baseline"]) for name, losses in first.items()}
-    times: dict[str, list[float]] = {name: [] for name in compiled}
-    names = list(compiled)
-    for r in range(args.rounds):  # each round starts one variant later: no fixed position
-        for name in names[r % len(names) :] + names[: r % len(names)]:
-            start = time.perf_counter()
-            jax.block_until_ready(calls[name]())
-            times[name].append(time.perf_counter() - start)
+    times = bench.time_rounds({name: calls[name] for name in compiled}, args.rounds)
     base = statistics.median(times["baseline"])
     width = max(len(name) for name in times)
     head = f"{'variant':{width}s}  {'same HLO':>8s}  {'bit-identical':>13s}"

@@ -158,6 +158,20 @@ def time_calls(fn: Callable[[], Any], repeats: int) -> list[float]:
     return times
 
 
+def time_rounds(calls: dict[str, Callable[[], Any]], rounds: int) -> dict[str, list[float]]:
+    """Seconds of each of `calls` (already warmed up), alternated: every round calls each once,
+    starting one call later than the round before, so the VM's drift touches them alike and no
+    call always runs first."""
+    names = list(calls)
+    times: dict[str, list[float]] = {name: [] for name in names}
+    for r in range(rounds):
+        for name in names[r % len(names) :] + names[: r % len(names)]:
+            start = time.perf_counter()
+            block(calls[name]())
+            times[name].append(time.perf_counter() - start)
+    return times
+
+
 def summarize(times: Sequence[float]) -> dict[str, Any]:
     """Median and best of a list of timings."""
     return {"median_s": statistics.median(times), "min_s": min(times), "all_s": list(times)}

@@ -17,12 +17,16 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import time
+import sys
 from collections.abc import Callable
+from pathlib import Path
 
-import jax
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from arld_jax.train import compiler_options
+import bench  # noqa: E402
+import jax  # noqa: E402
+
+from arld_jax.train import compiler_options  # noqa: E402
 
 SIZE = 256  # B = I = O: every operand and product is SIZE x SIZE
 
@@ -60,17 +64,11 @@ def main() -> None:
         ynn[name] = "__ynn_fusion" in compiled.as_text()
         calls[name] = (lambda c: lambda: c(a, m))(compiled)
         jax.block_until_ready(calls[name]())  # warm-up
-    names = list(calls)
-    times: dict[str, list[float]] = {name: [] for name in names}
-    for r in range(args.rounds):
-        for name in names[r % len(names) :] + names[: r % len(names)]:
-            start = time.perf_counter()
-            jax.block_until_ready(calls[name]())
-            times[name].append(time.perf_counter() - start)
+    times = bench.time_rounds(calls, args.rounds)
 
     print(f"{SIZE}x{SIZE} @ {SIZE}x{SIZE}; {args.dots} products per call, median of {args.rounds}")
     print(f"{'product':34s} {'kernel':>8s} {'us each':>8s} {'GFLOP/s':>8s}")
-    for name in names:
+    for name in calls:
         seconds = statistics.median(times[name]) / args.dots
         kernel = "YNNPACK" if ynn[name] else "generic"
         print(f"{name:34s} {kernel:>8s} {seconds * 1e6:8.1f} {2 * SIZE**3 / seconds / 1e9:8.1f}")
