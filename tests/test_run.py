@@ -91,6 +91,41 @@ def test_pruning_follows_each_fields_strategies():
     assert sweep.num_runs == 13 * len(sweep.seeds)
 
 
+def test_arld_400k_preset_is_the_papers_protocol_with_figure_4s_cells():
+    """Appendix A.1's protocol (400k steps, 1 env, one update per step, budget 10,000, N_r 5,000,
+    eval every 5,000, replay holding the whole run) with Fig. 4's sigma_theta cells."""
+    _, sweep = run.parse_args(["seed_sweep", "--preset", "arld_400k"])
+    cfg = sweep.cfg
+    assert (cfg.total_env_steps, cfg.num_envs, cfg.updates_per_env_step, cfg.batch_size) == (
+        400_000,
+        1,
+        1.0,
+        256,
+    )
+    assert (cfg.budget, cfg.window_size, cfg.eval_every, cfg.replay_capacity) == (
+        10_000,
+        5_000,
+        5_000,
+        400_000,
+    )
+    assert cfg.num_eval_episodes >= 5 and cfg.backend == "mujoco" and cfg.demo_steps == 1
+    assert (cfg.init_alpha, cfg.autotune_alpha, cfg.reward_scale) == (0.2, False, 5.0)
+    assert cfg.per_alpha > 0 and cfg.eps_demo > 0 and cfg.expert_path is not None
+    cells = [
+        (c["strategy"], c.get("query_prob"), sweep.run_configs()[i * 5].t_query)
+        for i, c in enumerate(sweep.cells())
+    ]
+    assert cells == [
+        ("none", None, 0.1),
+        ("greedy", None, 0.1),
+        ("bernoulli", 0.1, 0.1),
+        ("bernoulli", 0.2, 0.1),
+        ("active", None, 0.1),
+    ]
+    assert sweep.seeds == (0, 1, 2, 3, 4)
+    assert all(c.uncertainty == "intrinsic" for c in sweep.run_configs())
+
+
 def test_static_field_list_is_refused():
     with pytest.raises(SystemExit, match="num_envs.*cannot be swept"):
         _sweep(num_envs="1,2")
