@@ -15,13 +15,19 @@ Every check runs in Python, before anything compiles, and names the field, the v
 
 from __future__ import annotations
 
+import ast
 import dataclasses
+import inspect
 import math
+import textwrap
 from dataclasses import dataclass, field
 from typing import Any
 
 import flax.struct
 import jax.numpy as jnp
+
+from arld_jax import checks
+from arld_jax.agents import REGISTRY
 
 STRATEGIES: tuple[str, ...] = ("none", "greedy", "bernoulli", "active")
 """Query strategies (paper section 4): SAC, GQSAC, BQSAC, AQSAC. The index is the id used on device."""
@@ -30,13 +36,26 @@ UNCERTAINTIES: tuple[str, ...] = ("intrinsic", "extrinsic")
 """Uncertainty measures: intrinsic = SAC's sigma_theta(s) (paper 3.2); extrinsic = Noisy SAC's analytic
 variance of the perturbed mean (paper 3.1). Choosing "extrinsic" also makes the agent a Noisy SAC."""
 
-AGENT_NAMES: tuple[str, ...] = ("sac", "td3", "boot_td3")
-"""Agent families (`arld_jax.agents`): SAC (Noisy SAC with uncertainty 'extrinsic'), TD3 (Noisy TD3
-with 'extrinsic'; Fujimoto et al. 2018) and Bootstrapped TD3 (K heads, Osband et al. 2016). One
-compiled program per family; the paper's Fig. 1 compares the TD3 family under ARLD."""
-NOISY_AGENTS: tuple[str, ...] = ("sac", "td3")
+STRATEGY_PREFIX: dict[str, str] = {"none": "", "greedy": "GQ", "bernoulli": "BQ", "active": "AQ"}
+"""The paper's names of the strategies' agents: SAC, GQSAC, BQSAC, AQSAC (section 4)."""
+
+AGENT_NAMES: tuple[str, ...] = tuple(REGISTRY)
+"""Agent families, one module each in `arld_jax.agents` (SAC, TD3, Bootstrapped TD3). One compiled
+program per family; the paper's Fig. 1 compares the TD3 family under ARLD."""
+NOISY_AGENTS: tuple[str, ...] = tuple(name for name, spec in REGISTRY.items() if spec.noisy)
 """Families with a noisy variant (uncertainty 'extrinsic' = Noisy SAC / Noisy TD3, paper 3.1); the
 others have one uncertainty of their own (Bootstrapped TD3: its heads' disagreement)."""
+AGENT_OPTIONS: tuple[type, ...] = tuple(
+    spec.options for spec in REGISTRY.values() if spec.options is not None
+)
+"""Each agent's own Config fields (`AgentSpec.options`); `Config` inherits them."""
+
+
+def paper_name(strategy: str, agent: str = "sac", uncertainty: str = "intrinsic") -> str:
+    """The paper's name of a cell's agent: SAC, GQSAC, BQSAC, AQSAC, AQNoisySAC (section 4), and
+    likewise AQTD3, BQNoisyTD3, GQBootTD3 for the Fig. 1 families."""
+    return STRATEGY_PREFIX[strategy] + REGISTRY[agent].variant(uncertainty)
+
 
 ENVS: tuple[str, ...] = ("halfcheetah", "toy")
 BACKENDS: tuple[str, ...] = ("mjx", "mujoco", "generalized", "positional", "spring")
@@ -46,8 +65,11 @@ MATMUL_DTYPES: tuple[str, ...] = ("float32", "bfloat16")
 
 
 @dataclass(frozen=True)
-class Config:
-    """Everything that defines a run. Defaults follow the paper (appendix A.1) where it says something."""
+class Config(*AGENT_OPTIONS):
+    """Everything that defines a run. Defaults follow the paper (appendix A.1) where it says something.
+
+    The fields below are the loop's; each agent family's own fields (TD3's smoothing noise,
+    Bootstrapped TD3's heads, SAC's log-std clips) come from its module (`AgentSpec.options`)."""
 
     # ---- environment (static) ----
     env_name: str = "halfcheetah"
@@ -78,8 +100,9 @@ class Config:
 
     # ---- agent (static: shapes and structure) ----
     agent: str = "sac"
-    """Agent family: 'sac' (SAC / Noisy SAC), 'td3' (TD3 / Noisy TD3) or 'boot_td3' (Bootstrapped
-    TD3). With uncertainty 'extrinsic', sac and td3 are their noisy variants (paper 3.1)."""
+    """Agent family, one of `AGENT_NAMES` (a module each in `arld_jax.agents`): 'sac' is SAC, 'td3'
+    TD3 (Fujimoto et al. 2018), 'boot_td3' Bootstrapped TD3 (K heads, Osband et al. 2016). With
+    uncertainty 'extrinsic', a family with a noisy variant trains it (Noisy SAC, paper 3.1)."""
     hidden_sizes: tuple[int, ...] = (256, 256)
     """Hidden layer widths of actor and critics (paper A.1: two layers of 256, ReLU)."""
     batch_size: int = 256
@@ -95,10 +118,6 @@ class Config:
     updates do not wait for the env step. Measured on the 2-core CPU with MJX (`benchmarks/bench.py
     --only overlap`) it is SLOWER at 1 env (0.69x, 0.64x on two hosts) and mixed at 16 envs (0.96x,
     1.09x), though 1.4x faster on the toy env; hence off. Kept for accelerators, where the overlap may pay."""
-    log_std_min: float = -20.0
-    """Lower clip of the actor's log-std head."""
-    log_std_max: float = 2.0
-    """Upper clip of the actor's log-std head."""
     noisy_sigma_init: float = 0.017
     """Initial sigma_w, sigma_b of the Noisy SAC mean head (Fortunato et al. 2017, independent noise)."""
     noisy_runs: bool = True
@@ -110,23 +129,6 @@ class Config:
     is an error."""
     matmul_dtype: str = "float32"
     """Dtype of matmul inputs in the MLPs ('bfloat16' uses AMX/tensor cores; accumulation stays f32)."""
-
-    # ---- TD3 family (static) ----
-    td3_policy_noise: float = 0.2
-    """Std of the target policy smoothing noise on a' (Fujimoto et al. 2018: 0.2), for td3/boot_td3."""
-    td3_noise_clip: float = 0.5
-    """The smoothing noise is clipped to [-c, c] (Fujimoto et al. 2018: c = 0.5)."""
-    td3_policy_delay: int = 2
-    """d: the actor and both target networks update once every d critic updates (Fujimoto et al.
-    2018: d = 2)."""
-    td3_exploration_noise: float = 0.1
-    """Std of the Gaussian noise added to the actor's action when exploring (Fujimoto et al. 2018:
-    0.1); the action is then clipped to [-1, 1]."""
-    boot_heads: int = 10
-    """K: actor heads and twin-critic heads of Bootstrapped TD3 (Osband et al. 2016: K = 10)."""
-    boot_mask_prob: float = 0.5
-    """p: each head learns from a transition with probability p, a Bernoulli bootstrap mask drawn
-    once per (replay slot, head) (Osband et al. 2016: p = 0.5; p = 1 shares all data)."""
 
     # ---- SAC (sweepable values) ----
     actor_lr: float = 3e-4
@@ -232,6 +234,26 @@ class Config:
         return dataclasses.replace(self, **changes)
 
 
+def field_docs() -> dict[str, str]:
+    """Config field -> its docstring (the string literal under each field), from `Config` and the
+    agents' option classes it inherits: the one source of `--help`'s field texts."""
+    docs: dict[str, str] = {}
+    for cls in reversed(Config.__mro__):
+        if not dataclasses.is_dataclass(cls):
+            continue
+        body = ast.parse(textwrap.dedent(inspect.getsource(cls))).body[0].body
+        for node, doc in zip(body, body[1:], strict=False):
+            if (
+                isinstance(node, ast.AnnAssign)
+                and isinstance(node.target, ast.Name)
+                and isinstance(doc, ast.Expr)
+                and isinstance(doc.value, ast.Constant)
+                and isinstance(doc.value.value, str)
+            ):
+                docs[node.target.id] = " ".join(doc.value.value.split())
+    return docs
+
+
 @dataclass(frozen=True)
 class Sweepable:
     """How a sweepable Config field travels into the compiled program (one row of `SWEEPABLES`)."""
@@ -242,7 +264,7 @@ class Sweepable:
     strategies: tuple[str, ...] | None = None  # strategies whose runs it can change (None: all)
 
 
-_QUERYING = ("greedy", "bernoulli", "active")
+_QUERYING = tuple(s for s in STRATEGIES if s != "none")
 _F32, _I32 = jnp.float32, jnp.int32
 SWEEPABLES: dict[str, Sweepable] = {
     "strategy": Sweepable("strategy", _I32, STRATEGIES.index),
@@ -268,30 +290,19 @@ SWEEPABLE: tuple[str, ...] = (*SWEEPABLES, "seed")
 """Config fields that one compiled program can vmap over (values, not shapes)."""
 
 
-@flax.struct.dataclass
-class HParams:
-    """The sweepable values of one run as device arrays (a leading axis when sweeping); one field
-    per row of `SWEEPABLES` (checked below)."""
-
-    strategy: jnp.ndarray  # int32, index into STRATEGIES
-    noisy: jnp.ndarray  # float32, 1.0 = noisy agent (Noisy SAC / Noisy TD3), extrinsic uncertainty
-    query_prob: jnp.ndarray
-    t_query: jnp.ndarray
-    demo_steps: jnp.ndarray  # int32
-    budget: jnp.ndarray  # int32
-    eps_demo: jnp.ndarray
-    actor_lr: jnp.ndarray
-    critic_lr: jnp.ndarray
-    alpha_lr: jnp.ndarray
-    gamma: jnp.ndarray
-    tau: jnp.ndarray
-    reward_scale: jnp.ndarray
-    init_alpha: jnp.ndarray
-    autotune_alpha: jnp.ndarray  # float32, 1.0 = tune alpha (eq. 18), 0.0 = fixed
-
-
-assert [f.name for f in dataclasses.fields(HParams)] == [s.hparam for s in SWEEPABLES.values()], (
-    "HParams and SWEEPABLES must list the same fields in the same order"
+HParams = flax.struct.dataclass(
+    type(
+        "HParams",
+        (),
+        {
+            "__annotations__": {spec.hparam: "jax.Array" for spec in SWEEPABLES.values()},
+            "__doc__": """The sweepable values of one run as device arrays (a leading axis when
+    sweeping): one field per row of `SWEEPABLES`, named by its `hparam` (strategy: int32 index into
+    STRATEGIES; noisy: 1.0 = the noisy variant, extrinsic uncertainty; demo_steps, budget: int32;
+    autotune_alpha: 1.0 = tune alpha, eq. 18; the rest float32).""",
+            "__module__": __name__,
+        },
+    )
 )
 
 
@@ -308,123 +319,109 @@ def hparams_from_config(cfg: Config) -> HParams:
 # ---------------------------------------------------------------- validation
 
 
-def _fail(name: str, value: Any, allowed: str) -> None:
-    raise ValueError(f"Config.{name} = {value!r} is invalid: allowed {allowed}.")
-
-
-def _choice(cfg: Config, name: str, options: tuple[str, ...]) -> None:
-    value = getattr(cfg, name)
-    if value not in options:
-        _fail(name, value, "one of " + ", ".join(repr(o) for o in options))
-
-
 def validate(cfg: Config) -> None:
     """Raise ValueError naming the first invalid field of `cfg` (called on construction)."""
-    for name in (
-        "num_envs",
-        "episode_length",
-        "total_env_steps",
-        "eval_every",
-        "num_eval_episodes",
-        "batch_size",
-        "replay_capacity",
-        "window_size",
-        "traces_per_eval",
-        "state_sample_size",
-    ):
-        value = getattr(cfg, name)
-        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-            _fail(name, value, "an integer >= 1")
+    checks.int_at_least(
+        cfg,
+        (
+            "num_envs",
+            "episode_length",
+            "total_env_steps",
+            "eval_every",
+            "num_eval_episodes",
+            "batch_size",
+            "replay_capacity",
+            "window_size",
+            "traces_per_eval",
+            "state_sample_size",
+        ),
+        1,
+    )
     if not isinstance(cfg.env_max_batch, int) or cfg.env_max_batch < -1:
-        _fail("env_max_batch", cfg.env_max_batch, "an integer >= 1, 0 (auto) or -1 (no limit)")
-    _choice(cfg, "agent", AGENT_NAMES)
-    _choice(cfg, "env_name", ENVS)
-    _choice(cfg, "backend", BACKENDS)
-    _choice(cfg, "strategy", STRATEGIES)
-    _choice(cfg, "uncertainty", UNCERTAINTIES)
-    _choice(cfg, "uncertainty_reduce", REDUCTIONS)
-    _choice(cfg, "window_records", WINDOW_RECORDS)
-    _choice(cfg, "matmul_dtype", MATMUL_DTYPES)
+        checks.fail(
+            "env_max_batch", cfg.env_max_batch, "an integer >= 1, 0 (auto) or -1 (no limit)"
+        )
+    checks.choice(cfg, "agent", AGENT_NAMES)
+    checks.choice(cfg, "env_name", ENVS)
+    checks.choice(cfg, "backend", BACKENDS)
+    checks.choice(cfg, "strategy", STRATEGIES)
+    checks.choice(cfg, "uncertainty", UNCERTAINTIES)
+    checks.choice(cfg, "uncertainty_reduce", REDUCTIONS)
+    checks.choice(cfg, "window_records", WINDOW_RECORDS)
+    checks.choice(cfg, "matmul_dtype", MATMUL_DTYPES)
     if not cfg.hidden_sizes or any(
         not isinstance(h, int) or isinstance(h, bool) or h < 1 for h in cfg.hidden_sizes
     ):
-        _fail("hidden_sizes", cfg.hidden_sizes, "a non-empty tuple of integers >= 1")
+        checks.fail("hidden_sizes", cfg.hidden_sizes, "a non-empty tuple of integers >= 1")
     if cfg.batch_size > cfg.replay_capacity:
-        _fail("batch_size", cfg.batch_size, f"<= replay_capacity ({cfg.replay_capacity})")
+        checks.fail("batch_size", cfg.batch_size, f"<= replay_capacity ({cfg.replay_capacity})")
     if cfg.window_size < cfg.num_envs:
-        _fail("window_size", cfg.window_size, f">= num_envs ({cfg.num_envs})")
+        checks.fail("window_size", cfg.window_size, f">= num_envs ({cfg.num_envs})")
     if cfg.num_envs > cfg.replay_capacity:
-        _fail("num_envs", cfg.num_envs, f"<= replay_capacity ({cfg.replay_capacity})")
+        checks.fail("num_envs", cfg.num_envs, f"<= replay_capacity ({cfg.replay_capacity})")
     if cfg.eval_every % cfg.num_envs:
-        _fail("eval_every", cfg.eval_every, f"a multiple of num_envs ({cfg.num_envs})")
+        checks.fail("eval_every", cfg.eval_every, f"a multiple of num_envs ({cfg.num_envs})")
     if cfg.total_env_steps % cfg.eval_every:
-        _fail(
+        checks.fail(
             "total_env_steps", cfg.total_env_steps, f"a multiple of eval_every ({cfg.eval_every})"
         )
     if cfg.iters_per_eval % cfg.traces_per_eval:
-        _fail(
+        checks.fail(
             "traces_per_eval",
             cfg.traces_per_eval,
             f"a divisor of eval_every / num_envs ({cfg.iters_per_eval})",
         )
     if not isinstance(cfg.learning_starts, int) or cfg.learning_starts < 0:
-        _fail("learning_starts", cfg.learning_starts, "an integer >= 0")
+        checks.fail("learning_starts", cfg.learning_starts, "an integer >= 0")
     if cfg.learning_starts >= cfg.total_env_steps:
-        _fail("learning_starts", cfg.learning_starts, f"< total_env_steps ({cfg.total_env_steps})")
+        checks.fail(
+            "learning_starts", cfg.learning_starts, f"< total_env_steps ({cfg.total_env_steps})"
+        )
     upi = cfg.updates_per_env_step * cfg.num_envs
     if cfg.updates_per_env_step <= 0 or abs(upi - round(upi)) > 1e-9:
-        _fail(
+        checks.fail(
             "updates_per_env_step",
             cfg.updates_per_env_step,
             f"> 0 with updates_per_env_step * num_envs ({cfg.num_envs}) a whole number",
         )
-    if not cfg.log_std_min < cfg.log_std_max:
-        _fail("log_std_min", cfg.log_std_min, f"< log_std_max ({cfg.log_std_max})")
     if not cfg.noisy_sigma_init >= 0:
-        _fail("noisy_sigma_init", cfg.noisy_sigma_init, ">= 0")
+        checks.fail("noisy_sigma_init", cfg.noisy_sigma_init, ">= 0")
     if not isinstance(cfg.noisy_runs, bool):
-        _fail("noisy_runs", cfg.noisy_runs, "True or False")
+        checks.fail("noisy_runs", cfg.noisy_runs, "True or False")
     if not cfg.noisy_runs and cfg.uncertainty == "extrinsic" and cfg.agent in NOISY_AGENTS:
-        _fail(
+        checks.fail(
             "noisy_runs",
             cfg.noisy_runs,
             f"True when uncertainty is 'extrinsic' (agent {cfg.agent!r} is then its noisy variant, "
             "whose mean head draws weight noise)",
         )
-    for name in ("td3_policy_noise", "td3_noise_clip", "td3_exploration_noise"):
-        if not getattr(cfg, name) >= 0:
-            _fail(name, getattr(cfg, name), ">= 0")
-    for name in ("td3_policy_delay", "boot_heads"):
-        value = getattr(cfg, name)
-        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-            _fail(name, value, "an integer >= 1")
-    if not 0 < cfg.boot_mask_prob <= 1:
-        _fail("boot_mask_prob", cfg.boot_mask_prob, "0 < p <= 1")
     for name in ("actor_lr", "critic_lr", "alpha_lr", "reward_scale", "init_alpha"):
         if not getattr(cfg, name) > 0:
-            _fail(name, getattr(cfg, name), "> 0")
+            checks.fail(name, getattr(cfg, name), "> 0")
     if not 0 <= cfg.gamma < 1:
-        _fail("gamma", cfg.gamma, "0 <= gamma < 1")
+        checks.fail("gamma", cfg.gamma, "0 <= gamma < 1")
     if not 0 < cfg.tau <= 1:
-        _fail("tau", cfg.tau, "0 < tau <= 1")
+        checks.fail("tau", cfg.tau, "0 < tau <= 1")
     if not cfg.per_alpha >= 0:
-        _fail("per_alpha", cfg.per_alpha, ">= 0")
+        checks.fail("per_alpha", cfg.per_alpha, ">= 0")
     if not 0 <= cfg.per_beta0 <= 1:
-        _fail("per_beta0", cfg.per_beta0, "0 <= per_beta0 <= 1")
+        checks.fail("per_beta0", cfg.per_beta0, "0 <= per_beta0 <= 1")
     if not cfg.per_eps > 0:
-        _fail("per_eps", cfg.per_eps, "> 0")
+        checks.fail("per_eps", cfg.per_eps, "> 0")
     if not cfg.eps_demo >= 0:
-        _fail("eps_demo", cfg.eps_demo, ">= 0")
+        checks.fail("eps_demo", cfg.eps_demo, ">= 0")
     if not 0 <= cfg.query_prob <= 1:
-        _fail("query_prob", cfg.query_prob, "0 <= b <= 1")
+        checks.fail("query_prob", cfg.query_prob, "0 <= b <= 1")
     if not 0 < cfg.t_query <= 1:
-        _fail("t_query", cfg.t_query, "0 < t_query <= 1")
+        checks.fail("t_query", cfg.t_query, "0 < t_query <= 1")
     if not isinstance(cfg.demo_steps, int) or cfg.demo_steps < 1:
-        _fail("demo_steps", cfg.demo_steps, "an integer C >= 1")
+        checks.fail("demo_steps", cfg.demo_steps, "an integer C >= 1")
     if not isinstance(cfg.budget, int) or cfg.budget < 0:
-        _fail("budget", cfg.budget, "an integer >= 0")
+        checks.fail("budget", cfg.budget, "an integer >= 0")
     if not isinstance(cfg.seed, int) or cfg.seed < 0:
-        _fail("seed", cfg.seed, "an integer >= 0")
+        checks.fail("seed", cfg.seed, "an integer >= 0")
+    for spec in REGISTRY.values():
+        spec.check(cfg)
 
 
 # ---------------------------------------------------------------- presets

@@ -1,6 +1,6 @@
 """The resumable driver: trains sweeps chunk by chunk with checkpoints, exports experts.
 
-`run_sweep` is the one place that compiles and runs a sweep (one program: `train.jit_chunk`), saving
+`run_sweep` is the one place that compiles and runs a sweep (one program: `compile.jit_chunk`), saving
 after every chunk in the format of `arld_jax.rundir`; rerunning the same sweep into the same
 directory resumes and ends with results identical to an uninterrupted run. `run_group` runs the
 members of a `SweepGroup` (one program per agent family) one after another. The command line is
@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from arld_jax import config as config_mod
+from arld_jax.agents import REGISTRY
 from arld_jax.config import Config
 from arld_jax.rundir import (
     CHECKPOINT_DIR,
@@ -107,7 +108,8 @@ def run_sweep(
     import orbax.checkpoint as ocp
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-    from arld_jax.train import jit_chunk, make_train, over_runs
+    from arld_jax.compile import jit_chunk, over_runs
+    from arld_jax.train import make_train
 
     cfg = sweep.cfg
     hooks = hooks or ChunkHooks()
@@ -308,10 +310,11 @@ def export_expert(run_dir: Path, out: Path) -> Path:
     saved = json.loads((run_dir / "config.json").read_text())
     cfg_dict = dict(saved["config"], hidden_sizes=tuple(saved["config"]["hidden_sizes"]))
     cfg = Config(**cfg_dict)
-    if cfg.agent != "sac":
+    if not REGISTRY[cfg.agent].exports_expert:
+        able = ", ".join(repr(n) for n, spec in REGISTRY.items() if spec.exports_expert)
         raise SystemExit(
-            f"error: {run_dir} trained agent {cfg.agent!r}; the expert is a SAC actor (paper A.1: "
-            "a pre-trained prioritized SAC model), export a run of agent 'sac'"
+            f"error: {run_dir} trained agent {cfg.agent!r}, whose actor cannot act as an expert "
+            f"(paper A.1: a pre-trained prioritized SAC model); export a run of agent {able}"
         )
     mngr = ocp.CheckpointManager((run_dir / CHECKPOINT_DIR).absolute())
     step = mngr.latest_step()

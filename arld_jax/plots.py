@@ -24,6 +24,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import EngFormatter
 
+from arld_jax.agents import REGISTRY
+from arld_jax.config import UNCERTAINTIES, paper_name
 from arld_jax.results import (
     Cell,
     RunDir,
@@ -41,13 +43,7 @@ DPI = 110
 SMOOTH_WINDOW = 5
 """Moving-average window of Fig. 3, in trace points."""
 
-_PREFIX = {"none": "", "greedy": "GQ", "bernoulli": "BQ", "active": "AQ"}
-"""Paper names: SAC, GQSAC, BQSAC, AQSAC (and the same with NoisySAC)."""
 _SHORT = {"demo_steps": "C", "query_prob": "b", "t_query": "t_query"}
-_UNCERTAINTY_TITLE = {
-    "intrinsic": "Intrinsic uncertainty: SAC σθ(s)",
-    "extrinsic": "Extrinsic uncertainty: Noisy SAC Var[μ̃θ]",
-}
 _LINESTYLES = ("-", "--", ":", "-.")
 
 Run = RunDir
@@ -113,6 +109,11 @@ def _queries(run: Run, cell: Cell) -> bool:
     return _field(run, cell, "strategy", "none") != "none"
 
 
+def uncertainty_title(run: Run, uncertainty: str | None, default: str) -> str:
+    """What u(s) is for the run's agent family under this uncertainty measure (a panel's title)."""
+    return REGISTRY[run.agent].uncertainty_titles.get(uncertainty or "", default)
+
+
 def cell_name(run: Run, cell: Cell, exclude: Sequence[str] = ()) -> str:
     """Short legend label in the paper's names, e.g. "AQSAC t_query=0.1", "BQNoisySAC b=0.4 C=2".
 
@@ -123,8 +124,7 @@ def cell_name(run: Run, cell: Cell, exclude: Sequence[str] = ()) -> str:
     uncertainty = _field(run, cell, "uncertainty")
     if strategy is None:
         return cell.cell_label or f"cell {cell.cell}"
-    agent = "NoisySAC" if uncertainty == "extrinsic" else "SAC"
-    parts = [_PREFIX.get(strategy, f"{strategy}-") + agent]
+    parts = [paper_name(strategy, run.agent, uncertainty or "intrinsic")]
     if strategy == "bernoulli" and "query_prob" not in exclude:
         parts.append(f"b={_field(run, cell, 'query_prob'):g}")
     if strategy == "active" and "t_query" not in exclude:
@@ -156,7 +156,7 @@ def _by_uncertainty(run: Run, cells: list[Cell]) -> list[tuple[str | None, list[
     """Cells split by uncertainty measure if both are present (intrinsic first), else one group."""
     present = [
         u
-        for u in ("intrinsic", "extrinsic")
+        for u in UNCERTAINTIES
         if any(_field(run, c, "uncertainty") == u for c in cells)
     ]
     if len(present) < 2:
@@ -263,7 +263,7 @@ def fig3_uncertainty(run: Run) -> Figure | None:
             ax.plot(x_all, mean, color=colors[cell.cell], lw=1.5, label=cell_name(run, cell))
             drawn += 1
         ax.set_ylabel(f"normalised uncertainty (moving avg, {SMOOTH_WINDOW} points)")
-        ax.set_title(_UNCERTAINTY_TITLE.get(uncertainty, "Uncertainty u(s)"), fontsize=10)
+        ax.set_title(uncertainty_title(run, uncertainty, "Uncertainty u(s)"), fontsize=10)
         _steps_axis(ax)
         _legend(ax)
     if not drawn:  # every trace constant or NaN: nothing to normalise
@@ -301,7 +301,7 @@ def fig4_5_returns(run: Run) -> Figure | None:
                 )
         if math.isfinite(expert):
             ax.axhline(expert, color="black", lw=1.5, label=f"expert ({expert:.0f})")
-        title = _UNCERTAINTY_TITLE.get(uncertainty, "Evaluation return")
+        title = uncertainty_title(run, uncertainty, "Evaluation return")
         if uncertainty is not None:
             title = ("Fig. 4 — " if uncertainty == "intrinsic" else "Fig. 5 — ") + title
         ax.set_title(title, fontsize=10)

@@ -36,7 +36,10 @@ import jax.numpy as jnp
 from arld_jax.config import STRATEGIES, HParams
 from arld_jax.types import PRNGKey
 
-NONE, GREEDY, BERNOULLI, ACTIVE = (STRATEGIES.index(s) for s in STRATEGIES)
+NONE, GREEDY, BERNOULLI, ACTIVE = (
+    STRATEGIES.index(name) for name in ("none", "greedy", "bernoulli", "active")
+)
+"""The strategies' ids on device (`hp.strategy`), each bound by its name."""
 
 
 @flax.struct.dataclass
@@ -74,10 +77,13 @@ def wants_query(qs: QueryState, key: PRNGKey, u: jax.Array, hp: HParams) -> jax.
     frac = jax.vmap(fraction_above, in_axes=(None, None, 0))(qs.window, qs.window_count, u)
     active = (qs.window_count > 0) & (frac < hp.t_query)
     bernoulli = jax.random.uniform(key, (num_envs,)) < hp.query_prob
-    by_strategy = jnp.stack(
-        [jnp.zeros(num_envs, bool), jnp.ones(num_envs, bool), bernoulli, active]
-    )  # [len(STRATEGIES), E]
-    return by_strategy[hp.strategy]
+    wish = {
+        "none": jnp.zeros(num_envs, bool),
+        "greedy": jnp.ones(num_envs, bool),
+        "bernoulli": bernoulli,
+        "active": active,
+    }
+    return jnp.stack([wish[name] for name in STRATEGIES])[hp.strategy]  # [len(STRATEGIES), E]
 
 
 def grant(want: jax.Array, qs: QueryState, steps_left: jax.Array, hp: HParams) -> jax.Array:
@@ -135,3 +141,16 @@ def query_step(
     record = jnp.ones_like(is_demo) if window_records == "all" else ~is_demo
     qs = record_uncertainty(qs, u, record)
     return qs, is_demo, granted > 0
+
+
+def hand_back(
+    qs: QueryState, is_demo: jax.Array, declined: jax.Array
+) -> tuple[QueryState, jax.Array]:
+    """An expert hands a query back (a person pressing "hand back" at the demonstration page):
+    where `declined` [E], this step is the agent's, the rest of the run is cancelled and its budget
+    returned. Returns the state and the steps the expert really acts on [E]."""
+    qs = qs.replace(
+        demos_used=qs.demos_used - jnp.sum(declined).astype(jnp.int32),
+        demo_remaining=jnp.where(declined, 0, qs.demo_remaining),
+    )
+    return qs, is_demo & ~declined

@@ -33,6 +33,7 @@ import numpy as np
 from scipy import stats
 
 from arld_jax import gait
+from arld_jax.config import STRATEGIES, UNCERTAINTIES, paper_name
 
 REQUIRED_FILES: tuple[str, ...] = ("config.json", "runs.json", "metrics.npz")
 """Files a run directory must have before it can be summarised or plotted."""
@@ -183,6 +184,11 @@ class RunDir:
     def cfg(self) -> dict[str, Any]:
         """The run's Config fields (config.json's "config")."""
         return self.config.get("config", {})
+
+    @property
+    def agent(self) -> str:
+        """The run's agent family (directories written before there was a choice trained SAC)."""
+        return self.cfg.get("agent", "sac")
 
     @property
     def name(self) -> str:
@@ -612,8 +618,7 @@ def summarize_group(group_dir: str | Path) -> list[dict[str, Any]]:
     rows = []
     for member in group_members(group_dir):
         run = load_run(member)
-        agent = run.cfg.get("agent", "sac")
-        rows += [{"member": member.name, "agent": agent, **row} for row in summarize(run)]
+        rows += [{"member": member.name, "agent": run.agent, **row} for row in summarize(run)]
     return rows
 
 
@@ -660,16 +665,6 @@ def write_group_summary(group_dir: str | Path) -> tuple[Path, Path]:
 # pairwise comparison of strategies (rliable)
 # -------------------------------------------------------------------------------------------------
 
-_STRATEGY_PREFIX = {"none": "", "greedy": "GQ", "bernoulli": "BQ", "active": "AQ"}
-_AGENT_NAME = {"sac": "SAC", "td3": "TD3", "boot_td3": "Boot-TD3"}
-_NOISY_NAME = {"sac": "Noisy SAC", "td3": "Noisy TD3"}
-
-
-def paper_name(strategy: str, agent: str = "sac") -> str:
-    """The paper's name of a strategy for an agent family: SAC, GQSAC, BQSAC, AQSAC (section 4);
-    TD3, AQTD3, ... and Boot-TD3, AQBoot-TD3, ... for the Fig. 1 agents."""
-    return _STRATEGY_PREFIX[strategy] + _AGENT_NAME.get(agent, agent)
-
 
 def comparison_pairs(run: RunDir) -> list[tuple[str, Cell, Cell]]:
     """The comparisons the paper draws, as (name, cell a, cell b) meaning "a minus b": for each
@@ -677,7 +672,7 @@ def comparison_pairs(run: RunDir) -> list[tuple[str, Cell, Cell]]:
     demonstrations that Fig. 1 says ARLD can fall behind), and for each strategy intrinsic vs
     extrinsic. Only where exactly one cell has each (strategy, uncertainty). Named after the run's
     agent family (AQSAC - BQSAC for SAC, AQTD3 - BQTD3 for TD3)."""
-    agent = run.cfg.get("agent", "sac")
+    agent = run.agent
     by_key: dict[tuple[str, str], list[Cell]] = {}
     for cell in group_cells(run):
         strategy = run_field(run, cell.runs[0], "strategy", "none")
@@ -685,15 +680,14 @@ def comparison_pairs(run: RunDir) -> list[tuple[str, Cell, Cell]]:
         by_key.setdefault((strategy, uncertainty), []).append(cell)
     one = {k: v[0] for k, v in by_key.items() if len(v) == 1}
     pairs = []
-    noisy = _NOISY_NAME.get(agent, "extrinsic")
-    for u, suffix in (("intrinsic", ""), ("extrinsic", f" ({noisy})")):
+    for u in UNCERTAINTIES:
         for other in ("bernoulli", "greedy", "none"):
             if ("active", u) in one and (other, u) in one:
-                name = f"{paper_name('active', agent)} - {paper_name(other, agent)}{suffix}"
+                name = f"{paper_name('active', agent, u)} - {paper_name(other, agent, u)}"
                 pairs.append((name, one[("active", u)], one[(other, u)]))
-    for s in ("active", "bernoulli", "greedy", "none"):
+    for s in STRATEGIES[::-1]:
         if (s, "intrinsic") in one and (s, "extrinsic") in one:
-            name = f"{paper_name(s, agent)}: intrinsic - extrinsic"
+            name = f"{paper_name(s, agent)} - {paper_name(s, agent, 'extrinsic')}"
             pairs.append((name, one[(s, "intrinsic")], one[(s, "extrinsic")]))
     return pairs
 

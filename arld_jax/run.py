@@ -15,7 +15,6 @@ uninterrupted run.
 from __future__ import annotations
 
 import argparse
-import ast
 import dataclasses
 import difflib
 import inspect
@@ -36,23 +35,6 @@ from arld_jax.sweep import (
     Sweep,
     SweepGroup,
 )
-
-
-def field_docs() -> dict[str, str]:
-    """Config field -> its docstring (the string literal under each field in config.py)."""
-    tree = ast.parse(inspect.getsource(config_mod))
-    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "Config")
-    docs, last = {}, None
-    for node in cls.body:
-        if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
-            last = node.target.id
-        elif isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant) and last:
-            docs[last] = " ".join(str(node.value.value).split())
-            last = None
-        else:
-            last = None
-    return docs
-
 
 FIELDS = {f.name: f for f in dataclasses.fields(Config) if f.name != "notes"}
 
@@ -142,7 +124,7 @@ def apply_overrides(
 
 
 def build_parser() -> argparse.ArgumentParser:
-    docs = field_docs()
+    docs = config_mod.field_docs()
     parser = argparse.ArgumentParser(
         prog="python -m arld_jax.run",
         description="ARLD (SAC / Noisy SAC + expert queries) on MJX HalfCheetah.",

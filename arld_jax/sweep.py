@@ -33,6 +33,7 @@ from arld_jax.config import (
     STRATEGIES,
     SWEEPABLE,
     SWEEPABLES,
+    UNCERTAINTIES,
     Config,
     HParams,
     hparams_from_config,
@@ -201,8 +202,8 @@ class SweepGroup:
 
 def _arld_cells(**extra: tuple[Any, ...]) -> dict[str, tuple[Any, ...]]:
     cells: dict[str, tuple[Any, ...]] = {
-        "strategy": ("none", "greedy", "bernoulli", "active"),
-        "uncertainty": ("intrinsic", "extrinsic"),
+        "strategy": STRATEGIES,
+        "uncertainty": UNCERTAINTIES,
     }
     cells.update(extra)
     return cells
@@ -383,7 +384,7 @@ def preset_fig1() -> SweepGroup:
     td3 = Sweep(cfg=cfg.replace(agent="td3"), sweep=_arld_cells(), seeds=tuple(range(5)))
     boot = Sweep(
         cfg=cfg.replace(agent="boot_td3"),
-        sweep={"strategy": ("none", "greedy", "bernoulli", "active")},
+        sweep={"strategy": STRATEGIES},
         seeds=tuple(range(5)),
     )
     return SweepGroup((("agent-td3", td3), ("agent-boot_td3", boot)))

@@ -580,8 +580,9 @@ def test_comparison_pairs_include_active_against_greedy(tmp_path: Path) -> None:
 
 
 def test_comparison_pairs_are_named_after_the_agent_family(tmp_path: Path) -> None:
-    """A TD3 run (Fig. 1) with both uncertainties: pairs are AQTD3 - BQTD3, ..., (Noisy TD3), and
-    the intrinsic - extrinsic pair per strategy; the cells paired are the right ones."""
+    """A TD3 run (Fig. 1) with both uncertainties: pairs are AQTD3 - BQTD3, ..., AQNoisyTD3 -
+    BQNoisyTD3, ..., and the intrinsic - extrinsic pair per strategy (AQTD3 - AQNoisyTD3); the
+    cells paired are the right ones."""
     cells = [
         {"strategy": s, "uncertainty": u}
         for s in ("none", "bernoulli", "active")
@@ -597,17 +598,17 @@ def test_comparison_pairs_are_named_after_the_agent_family(tmp_path: Path) -> No
     assert list(pairs) == [
         "AQTD3 - BQTD3",
         "AQTD3 - TD3",
-        "AQTD3 - BQTD3 (Noisy TD3)",
-        "AQTD3 - TD3 (Noisy TD3)",
-        "AQTD3: intrinsic - extrinsic",
-        "BQTD3: intrinsic - extrinsic",
-        "TD3: intrinsic - extrinsic",
+        "AQNoisyTD3 - BQNoisyTD3",
+        "AQNoisyTD3 - NoisyTD3",
+        "AQTD3 - AQNoisyTD3",
+        "BQTD3 - BQNoisyTD3",
+        "TD3 - NoisyTD3",
     ]
     field = lambda cell, name: results.run_field(run, cell.runs[0], name, None)  # noqa: E731
-    a, b = pairs["AQTD3 - BQTD3 (Noisy TD3)"]
+    a, b = pairs["AQNoisyTD3 - BQNoisyTD3"]
     assert (field(a, "strategy"), field(a, "uncertainty")) == ("active", "extrinsic")
     assert (field(b, "strategy"), field(b, "uncertainty")) == ("bernoulli", "extrinsic")
-    a, b = pairs["TD3: intrinsic - extrinsic"]
+    a, b = pairs["TD3 - NoisyTD3"]
     assert (field(a, "strategy"), field(a, "uncertainty")) == ("none", "intrinsic")
     assert (field(b, "strategy"), field(b, "uncertainty")) == ("none", "extrinsic")
 

@@ -7,14 +7,17 @@ per agent.
 
 from __future__ import annotations
 
+import dataclasses
+import sys
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy import stats
 
-from arld_jax import config, losses, networks
-from arld_jax.agents import AGENTS, boot_td3, td3
+from arld_jax import agents, config, losses, networks
+from arld_jax.agents import REGISTRY, boot_td3, td3
 from arld_jax.envs import make_env
 from arld_jax.evaluate import evaluate_policy
 from arld_jax.expert import toy_expert
@@ -56,9 +59,49 @@ def _changed(new, old) -> bool:  # noqa: ANN001
     )
 
 
-def test_agents_are_registered() -> None:
-    assert AGENTS["td3"] is td3.make and AGENTS["boot_td3"] is boot_td3.make
-    assert set(AGENTS) == set(config.AGENT_NAMES)
+def test_agents_are_registered_from_their_modules() -> None:
+    assert REGISTRY["td3"] is td3.SPEC and REGISTRY["boot_td3"] is boot_td3.SPEC
+    assert config.AGENT_NAMES == tuple(REGISTRY) == ("boot_td3", "sac", "td3")
+    assert config.NOISY_AGENTS == ("sac", "td3")  # Bootstrapped TD3 has no noisy variant
+    # Each family's own fields are Config fields, with their defaults and documented in --help.
+    fields = {f.name: f.default for f in dataclasses.fields(config.Config)}
+    assert fields["boot_heads"] == 10 and fields["td3_policy_delay"] == 2
+    assert fields["log_std_max"] == 2.0
+    assert "Osband" in config.field_docs()["boot_heads"]
+    # ... and their checks run for every Config.
+    with pytest.raises(ValueError, match=r"Config\.boot_heads = 0"):
+        config.tiny(boot_heads=0)
+    with pytest.raises(ValueError, match=r"Config\.td3_noise_clip = -1"):
+        config.tiny(td3_noise_clip=-1)
+    names = [config.paper_name(s, "boot_td3", "extrinsic") for s in config.STRATEGIES]
+    assert names == ["BootTD3", "GQBootTD3", "BQBootTD3", "AQBootTD3"]
+    assert config.paper_name("bernoulli", "sac", "extrinsic") == "BQNoisySAC"
+
+
+def test_an_agent_module_is_registered_by_being_there(tmp_path) -> None:  # noqa: ANN001
+    """Discovery: a module in the agents' folder with a SPEC is an agent; one without is not; two
+    modules with one name are an error. The contract tests below take their agents from REGISTRY,
+    so a new module gets every one of them."""
+    package = tmp_path / "more_agents"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "copy_td3.py").write_text(
+        "import dataclasses\nfrom arld_jax.agents import td3\n"
+        "SPEC = dataclasses.replace(td3.SPEC, name='copy_td3', display='CopyTD3')\n"
+    )
+    (package / "helpers.py").write_text("VALUE = 1\n")
+    sys.path.insert(0, str(tmp_path))
+    try:
+        found = agents.discover("more_agents", [str(package)])
+        assert list(found) == ["copy_td3"] and found["copy_td3"].display == "CopyTD3"
+        (package / "twin.py").write_text("from more_agents.copy_td3 import SPEC\n")
+        with pytest.raises(ValueError, match="two agent modules declare the name 'copy_td3'"):
+            agents.discover("more_agents", [str(package)])
+    finally:
+        sys.path.remove(str(tmp_path))
+        for name in [m for m in sys.modules if m.startswith("more_agents")]:
+            del sys.modules[name]
+    assert TOY_AGENTS == list(REGISTRY)
 
 
 # ---------------------------------------------------------------- 1. TD3's target, by hand
@@ -154,7 +197,7 @@ class _Compiled:
 
     def __init__(self, cfg: config.Config) -> None:
         self.cfg = cfg
-        self.agent = AGENTS[cfg.agent](cfg, OBS_DIM, ACTION_DIM)
+        self.agent = agents.make_agent(cfg, OBS_DIM, ACTION_DIM)
         self.hp = config.hparams_from_config(cfg)
         self.update = jax.jit(self.agent.update)
         self.no_update = jax.jit(self.agent.no_update)
@@ -415,7 +458,11 @@ def _sweep_configs(cfg: config.Config) -> list[config.Config]:
     return [cfg.replace(strategy=s, uncertainty=u, seed=k) for s in STRATEGIES for u, k in variants]
 
 
-@pytest.fixture(scope="module", params=["sac", "td3", "boot_td3"])
+TOY_AGENTS = list(REGISTRY)
+"""Every registered agent gets the contract tests below (learning the toy task, every strategy)."""
+
+
+@pytest.fixture(scope="module", params=TOY_AGENTS)
 def toy_runs(request):  # noqa: ANN001, ANN201
     """One compiled program per agent: every strategy x variant on the tiny toy config."""
     cfg = config.tiny(

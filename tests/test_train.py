@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 
 from arld_jax import query
+from arld_jax.compile import jit_chunk, over_runs, unroll_threefry_on_cpu
 from arld_jax.config import hparams_from_config, tiny
 from arld_jax.envs import toy_target_action
 from arld_jax.expert import toy_expert
 from arld_jax.rundir import is_key
 from arld_jax.sweep import Sweep
-from arld_jax.train import jit_chunk, make_train, only_if, over_runs, unroll_threefry_on_cpu
+from arld_jax.train import make_train, only_if
 
 TOY_EXPERT = toy_expert()
 SEEDS = (0, 1, 2)

@@ -1,7 +1,11 @@
 """The agent interface: what the loop, the query strategies, the replay and the driver know of an agent.
 
 An agent is a bundle of pure functions over its own state pytree (STYLE.md: Brax/PureJaxRL style),
-made by `make(cfg, obs_dim, action_dim)` in its module and registered by name in `arld_jax.agents`.
+made by `make(cfg, obs_dim, action_dim)` in its module. The module also declares, in one
+`SPEC = AgentSpec(...)`, everything the rest of the package knows of it: its name, its names in
+tables and figures, whether it has a noisy variant, its own Config fields and their checks, and
+whether its actor can serve as an expert. `arld_jax.agents` finds every module with a `SPEC`; the
+config's choices, the summaries, the figures, expert export and the contract tests derive from it.
 The loop (`arld_jax.train`) never looks inside the state: it calls
 
 * `init(key, hp)` -> state;
@@ -23,15 +27,18 @@ the mean head is always a noisy linear layer, its noise scale is `hp.noisy`.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import flax.struct
 import jax
 import jax.numpy as jnp
 import optax
 
-from arld_jax.config import HParams
 from arld_jax.types import Params, PRNGKey, Transition
+
+if TYPE_CHECKING:  # config imports the agents' registry: only annotations name it here
+    from arld_jax.config import Config, HParams
 
 AgentState = Any
 """An agent's own state pytree (parameters, optimizer states, counters)."""
@@ -63,7 +70,7 @@ class UpdateMetrics:
 
 
 UpdateFn = Callable[
-    [AgentState, Transition, jax.Array, jax.Array, HParams, PRNGKey],
+    [AgentState, Transition, jax.Array, jax.Array, "HParams", PRNGKey],
     tuple[AgentState, jax.Array, UpdateMetrics],
 ]
 
@@ -81,6 +88,46 @@ class Agent(NamedTuple):
     policy_params: Callable[[AgentState], Params]
     obs_dim: int
     action_dim: int
+
+
+def no_checks(cfg: Config) -> None:
+    """`AgentSpec.check` of an agent without fields of its own."""
+    del cfg
+
+
+@dataclass(frozen=True)
+class AgentSpec:
+    """What the package knows of one agent family, declared once in its module as `SPEC`."""
+
+    name: str
+    """`Config.agent`, e.g. 'sac'."""
+    make: Callable[[Config, int, int], Agent]
+    """`make(cfg, obs_dim, action_dim)`: the agent's pure functions."""
+    display: str
+    """Its name in the paper's style, prefixed by GQ/BQ/AQ for the query strategies: 'SAC'."""
+    uncertainty_titles: dict[str, str]
+    """Uncertainty measure -> what u(s) is for this agent, as a figure title."""
+    noisy_display: str | None = None
+    """The name of its noisy variant (uncertainty 'extrinsic', paper 3.1), or None if it has none
+    (then it has one uncertainty of its own, and a swept `uncertainty` is pruned)."""
+    options: type | None = None
+    """A frozen dataclass of its own Config fields (defaults and docstrings); `Config` inherits
+    from every agent's, so `--help`, config.json and sweeps see them like any other field."""
+    check: Callable[[Config], None] = no_checks
+    """Validation of those fields (`arld_jax.checks`), run by `config.validate` for every Config."""
+    exports_expert: bool = False
+    """Whether a trained actor of this family can be exported as an expert (`expert.py` acts with a
+    SAC actor: paper A.1's expert is "a pre-trained prioritized SAC model")."""
+
+    @property
+    def noisy(self) -> bool:
+        return self.noisy_display is not None
+
+    def variant(self, uncertainty: str) -> str:
+        """The name of the variant that a run with this uncertainty measure trains."""
+        if uncertainty == "extrinsic" and self.noisy_display is not None:
+            return self.noisy_display
+        return self.display
 
 
 # ---------------------------------------------------------------- shared pieces
@@ -101,6 +148,16 @@ def adam_step(
 def polyak(target: Params, online: Params, tau: jax.Array) -> Params:
     """Target-network soft update theta' <- tau theta + (1 - tau) theta' (Lillicrap et al. 2015)."""
     return jax.tree.map(lambda t, o: (1.0 - tau) * t + tau * o, target, online)
+
+
+def matmul_dtype(cfg: Config) -> jnp.dtype:
+    """The dtype of the networks' matmul inputs (`Config.matmul_dtype`; accumulation stays f32)."""
+    return jnp.bfloat16 if cfg.matmul_dtype == "bfloat16" else jnp.float32
+
+
+def dummy_inputs(obs_dim: int, action_dim: int) -> tuple[jax.Array, jax.Array]:
+    """An observation [1, obs_dim] and an action [1, action_dim] of zeros, to initialise networks."""
+    return jnp.zeros((1, obs_dim)), jnp.zeros((1, action_dim))
 
 
 def reduce_over_actions(x: jax.Array, how: str) -> jax.Array:

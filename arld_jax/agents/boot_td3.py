@@ -33,25 +33,49 @@ details):
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
 import chex
 import flax.struct
 import jax
 import jax.numpy as jnp
 import optax
 
-from arld_jax import losses
+from arld_jax import checks, losses
 from arld_jax.agents.base import (
     ADAM,
     Acting,
     Agent,
+    AgentSpec,
     UpdateMetrics,
-    adam_step,
+    dummy_inputs,
+    matmul_dtype,
     reduce_over_actions,
 )
-from arld_jax.agents.td3 import delayed_policy_step, explore
-from arld_jax.config import Config, HParams
+from arld_jax.agents.td3 import explore, td3_step
 from arld_jax.networks import MultiHeadActor, MultiHeadTwinCritic
 from arld_jax.types import Params, PRNGKey, Transition
+
+if TYPE_CHECKING:
+    from arld_jax.config import Config, HParams
+
+
+@dataclass(frozen=True)
+class BootTD3Options:
+    """Bootstrapped TD3's own Config fields (static), beside the TD3 family's (`TD3Options`)."""
+
+    boot_heads: int = 10
+    """K: actor heads and twin-critic heads of Bootstrapped TD3 (Osband et al. 2016: K = 10)."""
+    boot_mask_prob: float = 0.5
+    """p: each head learns from a transition with probability p, a Bernoulli bootstrap mask drawn
+    once per (replay slot, head) (Osband et al. 2016: p = 0.5; p = 1 shares all data)."""
+
+
+def check(cfg: Config) -> None:
+    checks.int_at_least(cfg, ("boot_heads",), 1)
+    if not 0 < cfg.boot_mask_prob <= 1:
+        checks.fail("boot_mask_prob", cfg.boot_mask_prob, "0 < p <= 1")
 
 
 @flax.struct.dataclass
@@ -100,7 +124,7 @@ def head_disagreement(actions: jax.Array, how: str = "mean") -> jax.Array:
 
 def make(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
     """Build the Bootstrapped TD3 agent for `cfg` (sizes, K, p and the TD3 constants static)."""
-    dtype = jnp.bfloat16 if cfg.matmul_dtype == "bfloat16" else jnp.float32
+    dtype = matmul_dtype(cfg)
     num_heads = cfg.boot_heads
     actor = MultiHeadActor(
         action_dim=action_dim, num_heads=num_heads, hidden_sizes=cfg.hidden_sizes, dtype=dtype
@@ -114,8 +138,7 @@ def make(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
     def init(key: PRNGKey, hp: HParams) -> BootTD3State:
         del hp
         k_actor, k_critic, k_mask, k_head = jax.random.split(key, 4)
-        obs = jnp.zeros((1, obs_dim))
-        action = jnp.zeros((1, action_dim))
+        obs, action = dummy_inputs(obs_dim, action_dim)
         actor_params = actor.init(k_actor, obs)
         critic_params = critic.init(k_critic, obs, action)
         return BootTD3State(
@@ -172,30 +195,17 @@ def make(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
         chex.assert_equal_shape([batch.reward, weights, indices])
         masks = masks_of(state, indices)
         k_critic = jax.random.split(key)[0]  # as in no_update, so both give the same TD errors
-        (c_loss, td), c_grads = jax.value_and_grad(critic_loss, has_aux=True)(
-            state.critic_params, state, batch, weights, masks, hp, k_critic
+        return td3_step(
+            state,
+            lambda critic_params: critic_loss(
+                critic_params, state, batch, weights, masks, hp, k_critic
+            ),
+            lambda actor_params, critic_params: actor_loss(
+                actor_params, critic_params, batch.obs, masks
+            ),
+            hp,
+            delay,
         )
-        critic_params, critic_opt = adam_step(
-            state.critic_params, c_grads, state.critic_opt, hp.critic_lr
-        )
-        a_loss, a_grads = jax.value_and_grad(actor_loss)(
-            state.actor_params, critic_params, batch.obs, masks
-        )
-        actor_params, actor_opt = adam_step(
-            state.actor_params, a_grads, state.actor_opt, hp.actor_lr
-        )
-        new_state = delayed_policy_step(
-            state, critic_params, critic_opt, actor_params, actor_opt, hp.tau, delay
-        )
-        zero = jnp.zeros(())
-        metrics = UpdateMetrics(
-            critic_loss=c_loss,
-            actor_loss=a_loss,
-            alpha=zero,
-            entropy=zero,
-            td_abs=jnp.mean(jnp.abs(td)),
-        )
-        return new_state, td, metrics
 
     def no_update(
         state: BootTD3State,
@@ -242,3 +252,13 @@ def make(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
         obs_dim=obs_dim,
         action_dim=action_dim,
     )
+
+
+SPEC = AgentSpec(
+    name="boot_td3",
+    make=make,
+    display="BootTD3",
+    uncertainty_titles={"intrinsic": "Bootstrapped TD3: the heads' disagreement"},
+    options=BootTD3Options,
+    check=check,
+)

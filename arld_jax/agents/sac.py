@@ -8,26 +8,49 @@ analytic variance of the perturbed mean.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
 import chex
 import flax.struct
 import jax
 import jax.numpy as jnp
 import optax
 
-from arld_jax import losses
+from arld_jax import checks, losses
 from arld_jax.agents.base import (
     ADAM,
     Acting,
     Agent,
+    AgentSpec,
     UpdateMetrics,
     adam_step,
+    dummy_inputs,
+    matmul_dtype,
     polyak,
     reduce_over_actions,
     same_episode,
 )
-from arld_jax.config import Config, HParams
 from arld_jax.networks import Actor, PolicyOutput, TwinCritic, deterministic_action, sample_action
 from arld_jax.types import Params, PRNGKey, Transition
+
+if TYPE_CHECKING:
+    from arld_jax.config import Config, HParams
+
+
+@dataclass(frozen=True)
+class SACOptions:
+    """SAC's own Config fields (static)."""
+
+    log_std_min: float = -20.0
+    """Lower clip of the actor's log-std head."""
+    log_std_max: float = 2.0
+    """Upper clip of the actor's log-std head."""
+
+
+def check(cfg: Config) -> None:
+    if not cfg.log_std_min < cfg.log_std_max:
+        checks.fail("log_std_min", cfg.log_std_min, f"< log_std_max ({cfg.log_std_max})")
 
 
 @flax.struct.dataclass
@@ -45,7 +68,7 @@ class SACState:
 
 def make(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
     """Build the SAC agent for `cfg` (network sizes and dtype are static)."""
-    dtype = jnp.bfloat16 if cfg.matmul_dtype == "bfloat16" else jnp.float32
+    dtype = matmul_dtype(cfg)
     actor = Actor(
         action_dim=action_dim,
         hidden_sizes=cfg.hidden_sizes,
@@ -60,8 +83,7 @@ def make(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
 
     def init(key: PRNGKey, hp: HParams) -> SACState:
         k_actor, k_critic, k_noise = jax.random.split(key, 3)
-        obs = jnp.zeros((1, obs_dim))
-        action = jnp.zeros((1, action_dim))
+        obs, action = dummy_inputs(obs_dim, action_dim)
         actor_params = actor.init(k_actor, obs, k_noise, jnp.float32(0.0))
         critic_params = critic.init(k_critic, obs, action)
         log_alpha = jnp.log(hp.init_alpha).astype(jnp.float32)
@@ -209,3 +231,18 @@ def uncertainty(policy: PolicyOutput, noisy: jax.Array, how: str = "mean") -> ja
     intrinsic = reduce_over_actions(jnp.exp(policy.log_std), how)
     extrinsic = reduce_over_actions(policy.mean_var, how)
     return jnp.where(noisy > 0.5, extrinsic, intrinsic)
+
+
+SPEC = AgentSpec(
+    name="sac",
+    make=make,
+    display="SAC",
+    noisy_display="NoisySAC",
+    uncertainty_titles={
+        "intrinsic": "Intrinsic uncertainty: SAC σθ(s)",
+        "extrinsic": "Extrinsic uncertainty: Noisy SAC Var[μ̃θ]",
+    },
+    options=SACOptions,
+    check=check,
+    exports_expert=True,
+)

@@ -29,7 +29,9 @@ Readings that are ours (the paper names Noisy TD3 and shows its curves, Fig. 1a,
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import chex
 import flax.struct
@@ -37,20 +39,46 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from arld_jax import losses
+from arld_jax import checks, losses
 from arld_jax.agents.base import (
     ADAM,
     Acting,
     Agent,
+    AgentSpec,
     UpdateMetrics,
     adam_step,
+    dummy_inputs,
+    matmul_dtype,
     polyak,
     reduce_over_actions,
     same_episode,
 )
-from arld_jax.config import Config, HParams
 from arld_jax.networks import DeterministicActor, TwinCritic
 from arld_jax.types import Params, PRNGKey, Transition
+
+if TYPE_CHECKING:
+    from arld_jax.config import Config, HParams
+
+
+@dataclass(frozen=True)
+class TD3Options:
+    """The TD3 family's own Config fields (static; Bootstrapped TD3 uses them too)."""
+
+    td3_policy_noise: float = 0.2
+    """Std of the target policy smoothing noise on a' (Fujimoto et al. 2018: 0.2), for td3/boot_td3."""
+    td3_noise_clip: float = 0.5
+    """The smoothing noise is clipped to [-c, c] (Fujimoto et al. 2018: c = 0.5)."""
+    td3_policy_delay: int = 2
+    """d: the actor and both target networks update once every d critic updates (Fujimoto et al.
+    2018: d = 2)."""
+    td3_exploration_noise: float = 0.1
+    """Std of the Gaussian noise added to the actor's action when exploring (Fujimoto et al. 2018:
+    0.1); the action is then clipped to [-1, 1]."""
+
+
+def check(cfg: Config) -> None:
+    checks.non_negative(cfg, ("td3_policy_noise", "td3_noise_clip", "td3_exploration_noise"))
+    checks.int_at_least(cfg, ("td3_policy_delay",), 1)
 
 
 @flax.struct.dataclass
@@ -116,6 +144,38 @@ def delayed_policy_step(
     )
 
 
+def td3_step(
+    state: Any,
+    critic_loss: Callable[[Params], tuple[jax.Array, jax.Array]],
+    actor_loss: Callable[[Params, Params], jax.Array],
+    hp: HParams,
+    delay: int,
+) -> tuple[Any, jax.Array, UpdateMetrics]:
+    """One update of a TD3-family agent (TD3's or Bootstrapped TD3's state: same fields) from its
+    losses: the critics by `critic_loss(critic_params) -> (loss, td)`; the actor by
+    `actor_loss(actor_params, critic_params)` against the new critics; applied by
+    `delayed_policy_step`. Returns the new state, the TD errors and metrics (the actor loss is
+    reported at the current actor, also on updates that do not apply it)."""
+    (c_loss, td), c_grads = jax.value_and_grad(critic_loss, has_aux=True)(state.critic_params)
+    critic_params, critic_opt = adam_step(
+        state.critic_params, c_grads, state.critic_opt, hp.critic_lr
+    )
+    a_loss, a_grads = jax.value_and_grad(actor_loss)(state.actor_params, critic_params)
+    actor_params, actor_opt = adam_step(state.actor_params, a_grads, state.actor_opt, hp.actor_lr)
+    new_state = delayed_policy_step(
+        state, critic_params, critic_opt, actor_params, actor_opt, hp.tau, delay
+    )
+    zero = jnp.zeros(())
+    metrics = UpdateMetrics(
+        critic_loss=c_loss,
+        actor_loss=a_loss,
+        alpha=zero,
+        entropy=zero,
+        td_abs=jnp.mean(jnp.abs(td)),
+    )
+    return new_state, td, metrics
+
+
 def explore(mean_action: jax.Array, key: PRNGKey, noise_std: float) -> jax.Array:
     """TD3's exploration action clip(a + N(0, sigma^2), -1, 1) (Fujimoto et al. 2018)."""
     noise = noise_std * jax.random.normal(key, mean_action.shape)
@@ -138,7 +198,7 @@ def uncertainty(
 
 def make(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
     """Build the TD3 / Noisy TD3 agent for `cfg` (network sizes, dtype and TD3 constants static)."""
-    dtype = jnp.bfloat16 if cfg.matmul_dtype == "bfloat16" else jnp.float32
+    dtype = matmul_dtype(cfg)
     actor = DeterministicActor(
         action_dim=action_dim,
         hidden_sizes=cfg.hidden_sizes,
@@ -152,8 +212,7 @@ def make(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
     def init(key: PRNGKey, hp: HParams) -> TD3State:
         del hp
         k_actor, k_critic, k_noise = jax.random.split(key, 3)
-        obs = jnp.zeros((1, obs_dim))
-        action = jnp.zeros((1, action_dim))
+        obs, action = dummy_inputs(obs_dim, action_dim)
         actor_params = actor.init(k_actor, obs, k_noise, jnp.float32(0.0))
         critic_params = critic.init(k_critic, obs, action)
         return TD3State(
@@ -199,30 +258,15 @@ def make(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
         chex.assert_rank(batch.reward, 1)
         chex.assert_equal_shape([batch.reward, weights])
         k_critic, k_actor = jax.random.split(key)
-        (c_loss, td), c_grads = jax.value_and_grad(critic_loss, has_aux=True)(
-            state.critic_params, state, batch, weights, hp, k_critic
+        return td3_step(
+            state,
+            lambda critic_params: critic_loss(critic_params, state, batch, weights, hp, k_critic),
+            lambda actor_params, critic_params: actor_loss(
+                actor_params, critic_params, batch.obs, hp, k_actor
+            ),
+            hp,
+            delay,
         )
-        critic_params, critic_opt = adam_step(
-            state.critic_params, c_grads, state.critic_opt, hp.critic_lr
-        )
-        a_loss, a_grads = jax.value_and_grad(actor_loss)(
-            state.actor_params, critic_params, batch.obs, hp, k_actor
-        )
-        actor_params, actor_opt = adam_step(
-            state.actor_params, a_grads, state.actor_opt, hp.actor_lr
-        )
-        new_state = delayed_policy_step(
-            state, critic_params, critic_opt, actor_params, actor_opt, hp.tau, delay
-        )
-        zero = jnp.zeros(())
-        metrics = UpdateMetrics(
-            critic_loss=c_loss,
-            actor_loss=a_loss,  # at the current actor, also on updates that do not apply it
-            alpha=zero,
-            entropy=zero,
-            td_abs=jnp.mean(jnp.abs(td)),
-        )
-        return new_state, td, metrics
 
     def no_update(
         state: TD3State,
@@ -270,3 +314,17 @@ def make(cfg: Config, obs_dim: int, action_dim: int) -> Agent:
         obs_dim=obs_dim,
         action_dim=action_dim,
     )
+
+
+SPEC = AgentSpec(
+    name="td3",
+    make=make,
+    display="TD3",
+    noisy_display="NoisyTD3",
+    uncertainty_titles={
+        "intrinsic": "TD3: twin-critic gap |Q₀ − Q₁|",
+        "extrinsic": "Extrinsic uncertainty: Noisy TD3 Var[μ̃]",
+    },
+    options=TD3Options,
+    check=check,
+)
