@@ -8,15 +8,16 @@
 The update alone is the benchmark's program (`programs.update_call`, on a fixed batch, HalfCheetah's
 shapes); the trainer is `programs.trainer_config` at the paper's sizes (1 update per env step,
 periods of 2,000 env steps, one evaluation episode), compiled as the driver does
-(`programs.compile_trainer`). The script times untraced calls, then traces one call with `jax.profiler` and XLA:CPU's per-op events
-(`--xla_cpu_enable_xprof_traceme`), names each op through the compiled HLO's `op_name` metadata (its
-jax scope) and sums the ops' durations per category. Ops run side by side on the CPU's threads, so
-each category is printed as a share of the threads' capacity over the traced span (span x threads
-that ran at least 5% of the ops' time), and what no op used is "idle": a thread waiting on a
-dependency or on the runtime's dispatch between ops (or running work that has no trace event). Perfetto's export keeps the first 1,000,000 events (about 650 trainer
-iterations at 1 env); the span is that of the events kept, so the shares hold for the part traced
-(the trainer's evaluation, at the end of a period, is then not in it; the benchmark's `trainer`
-section times it alone).
+(`programs.compile_trainer`). The script times untraced calls, then traces one call with
+`jax.profiler` and XLA:CPU's per-op events (`--xla_cpu_enable_xprof_traceme`), names each op through
+the compiled HLO's `op_name` metadata (its jax scope) and sums the ops' durations per category. Ops
+run side by side on the CPU's threads, so each category is printed as a share of the threads'
+capacity over the traced span (span x threads that ran at least 5% of the ops' time), and what no op
+used is "idle": a thread waiting on a dependency or on the runtime's dispatch between ops (or
+running work that has no trace event). Perfetto's export keeps the first 1,000,000 events (about 650
+trainer iterations at 1 env); the span is that of the events kept, so the shares hold for the part
+traced (the trainer's evaluation, at the end of a period, is then not in it; the benchmark's
+`trainer` section times it alone).
 
 Categories: the update's matmuls (YNNPACK fusions and dots), its networks' and losses' element-wise
 work (bias + ReLU, ReLU masks, the policy's squashing and log-probabilities, loss reductions), its
