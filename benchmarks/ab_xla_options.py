@@ -1,9 +1,9 @@
 """A/B of XLA compiler options on the update alone, interleaved in one process.
 
-    python benchmarks/ab_xla_options.py xla_cpu_prefer_vector_width=512 \\
+    python -m benchmarks.ab_xla_options xla_cpu_prefer_vector_width=512 \\
         xla_cpu_experimental_ynn_fusion_type=LIBRARY_FUSION_TYPE_DOT
 
-Each argument `name=value` is one variant: the benchmark's update-alone program (`bench.update_call`,
+Each argument `name=value` is one variant: the benchmark's update-alone program (`programs.update_call`,
 B 256, 2x256, HalfCheetah's shapes) compiled with `train.compiler_options()` plus that option, beside
 the baseline with `train.compiler_options()` alone. All variants are compiled first, then their calls
 alternate for `--rounds` rounds, each round starting one variant later, so the VM's drift
@@ -20,13 +20,11 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+import numpy as np
 
-import bench  # noqa: E402
-import numpy as np  # noqa: E402
+from benchmarks.harness import time_rounds
+from benchmarks.programs import HC_ACTION_DIM, HC_OBS_DIM, PAPER_UPDATE, update_call
 
 
 def parse_option(text: str) -> tuple[str, bool | int | str]:
@@ -46,13 +44,13 @@ def main() -> None:
     parser.add_argument("--updates", type=int, default=100, help="scanned updates per call")
     args = parser.parse_args()
 
-    cfg = bench.PAPER_UPDATE
+    cfg = PAPER_UPDATE
     variants = {"baseline": {}} | {f"{k}={v}": {k: v} for k, v in args.options}
     calls, compiled = {}, {}
     for name, option in variants.items():
         try:
-            calls[name], compiled[name] = bench.update_call(
-                cfg, bench.HC_OBS_DIM, bench.HC_ACTION_DIM, args.updates, extra_options=option
+            calls[name], compiled[name] = update_call(
+                cfg, HC_OBS_DIM, HC_ACTION_DIM, args.updates, extra_options=option
             )
         except Exception as e:  # noqa: BLE001 (an unknown option or value: report it, go on)
             print(f"{name}: not compiled: {str(e).splitlines()[0][:200]}")
@@ -60,7 +58,7 @@ def main() -> None:
     same_hlo = {name: body(fn) == body(compiled["baseline"]) for name, fn in compiled.items()}
     first = {name: np.asarray(call()) for name, call in calls.items()}  # from the same start
     identical = {name: np.array_equal(losses, first["baseline"]) for name, losses in first.items()}
-    times = bench.time_rounds({name: calls[name] for name in compiled}, args.rounds)
+    times = time_rounds({name: calls[name] for name in compiled}, args.rounds)
     base = statistics.median(times["baseline"])
     width = max(len(name) for name in times)
     head = f"{'variant':{width}s}  {'same HLO':>8s}  {'bit-identical':>13s}"

@@ -1,6 +1,6 @@
 """How fast XLA:CPU multiplies in each operand layout a Dense layer's forward and backward use.
 
-    python benchmarks/dot_layouts.py [--rounds 9] [--dots 200]
+    python -m benchmarks.dot_layouts [--rounds 9] [--dots 200]
 
 A Dense layer y = x @ w (x [B, I], w [I, O]) makes three products per update: the forward x @ w, the
 input gradient g @ wᵀ and the weight gradient xᵀ @ g, which contracts the batch axis, the leading
@@ -17,16 +17,12 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 from collections.abc import Callable
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+import jax
 
-import bench  # noqa: E402
-import jax  # noqa: E402
-
-from arld_jax.train import compiler_options  # noqa: E402
+from arld_jax.train import compiler_options
+from benchmarks.harness import time_rounds
 
 SIZE = 256  # B = I = O: every operand and product is SIZE x SIZE
 
@@ -64,7 +60,7 @@ def main() -> None:
         ynn[name] = "__ynn_fusion" in compiled.as_text()
         calls[name] = (lambda c: lambda: c(a, m))(compiled)
         jax.block_until_ready(calls[name]())  # warm-up
-    times = bench.time_rounds(calls, args.rounds)
+    times = time_rounds(calls, args.rounds)
 
     print(f"{SIZE}x{SIZE} @ {SIZE}x{SIZE}; {args.dots} products per call, median of {args.rounds}")
     print(f"{'product':34s} {'kernel':>8s} {'us each':>8s} {'GFLOP/s':>8s}")

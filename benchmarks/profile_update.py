@@ -1,21 +1,23 @@
 """Where the time of one SAC update, or of the trainer's loop, goes: a profiler trace summed per op.
 
-    python benchmarks/profile_update.py                      # the update alone, B 256, 2x256
-    python benchmarks/profile_update.py --seeds 8            # the update vmapped over 8 agents
-    python benchmarks/profile_update.py --trainer 1          # the trainer, 1 env, C physics
-    python benchmarks/profile_update.py --trainer 16 --backend mjx --top 40
+    python -m benchmarks.profile_update                      # the update alone, B 256, 2x256
+    python -m benchmarks.profile_update --seeds 8            # the update vmapped over 8 agents
+    python -m benchmarks.profile_update --trainer 1          # the trainer, 1 env, C physics
+    python -m benchmarks.profile_update --trainer 16 --backend mjx --top 40
 
-The update alone is the benchmark's program (`bench.update_call`, on a fixed batch, HalfCheetah's
-shapes); the trainer is `bench.trainer_config` at the paper's sizes (1 update per env step, periods of
-2,000 env steps, one evaluation episode), compiled as the driver does (`bench.compile_trainer`). The
-script times untraced calls, then traces one call with `jax.profiler` and XLA:CPU's per-op events
-(`--xla_cpu_enable_xprof_traceme`), names each op through the compiled HLO's `op_name` metadata (its
-jax scope) and sums the ops' durations per category. Ops run side by side on the CPU's threads, so
-each category is printed as a share of the threads' capacity over the traced span (span x threads
-that ran at least 5% of the ops' time), and what no op used is "idle": a thread waiting on a
-dependency or on the runtime's dispatch between ops (or running work that has no trace event). Perfetto's export keeps the first 1,000,000 events (about 650 trainer
-iterations at 1 env); the span is that of the events kept, so the shares hold for the part traced
-(the trainer's evaluation, at the end of a period, is then not in it; bench.py times it alone).
+The update alone is the benchmark's program (`programs.update_call`, on a fixed batch, HalfCheetah's
+shapes); the trainer is `programs.trainer_config` at the paper's sizes (1 update per env step,
+periods of 2,000 env steps, one evaluation episode), compiled as the driver does
+(`programs.compile_trainer`). The script times untraced calls, then traces one call with
+`jax.profiler` and XLA:CPU's per-op events (`--xla_cpu_enable_xprof_traceme`), names each op through
+the compiled HLO's `op_name` metadata (its jax scope) and sums the ops' durations per category. Ops
+run side by side on the CPU's threads, so each category is printed as a share of the threads'
+capacity over the traced span (span x threads that ran at least 5% of the ops' time), and what no op
+used is "idle": a thread waiting on a dependency or on the runtime's dispatch between ops (or
+running work that has no trace event). Perfetto's export keeps the first 1,000,000 events (about 650
+trainer iterations at 1 env); the span is that of the events kept, so the shares hold for the part
+traced (the trainer's evaluation, at the end of a period, is then not in it; the benchmark's
+`trainer` section times it alone).
 
 Categories: the update's matmuls (YNNPACK fusions and dots), its networks' and losses' element-wise
 work (bias + ReLU, ReLU masks, the policy's squashing and log-probabilities, loss reductions), its
@@ -37,7 +39,6 @@ import json
 import os
 import re
 import statistics
-import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -47,13 +48,20 @@ from typing import Any
 os.environ["XLA_FLAGS"] = (
     os.environ.get("XLA_FLAGS", "") + " --xla_cpu_enable_xprof_traceme=true"
 ).strip()
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import bench  # noqa: E402
-import jax  # noqa: E402
+import jax  # noqa: E402  (after XLA_FLAGS: jax reads them when its backend starts)
 import jax.numpy as jnp  # noqa: E402
 
 from arld_jax.train import make_train  # noqa: E402
+from benchmarks.programs import (  # noqa: E402
+    FULL,
+    HC_ACTION_DIM,
+    HC_OBS_DIM,
+    PAPER_UPDATE,
+    compile_trainer,
+    trainer_config,
+    update_call,
+)
 
 NETWORK_SCOPES = ("Actor", "Critic", "softplus", "_normal", "tanh", "log", "exp", "reduce_sum")
 OPTIMIZER_OPS = ("add", "sub", "mul", "div", "sqrt", "pow", "integer_pow", "select_n")
@@ -135,17 +143,16 @@ def ops_running(ops: list[dict]) -> list[float]:
 def update_program(seeds: int, updates: int) -> tuple[Any, Callable[[], object], int]:
     """The update alone over `seeds` agents (1: not vmapped): compiled program, one call of it
     on fixed inputs, and the updates a call makes."""
-    cfg = bench.PAPER_UPDATE
-    call, compiled = bench.update_call(cfg, bench.HC_OBS_DIM, bench.HC_ACTION_DIM, updates, seeds)
+    call, compiled = update_call(PAPER_UPDATE, HC_OBS_DIM, HC_ACTION_DIM, updates, seeds)
     return compiled, call, updates * seeds
 
 
 def trainer_program(num_envs: int, backend: str) -> tuple[Any, Callable[[], object], int]:
     """The 1-seed trainer after its warm-up period: compiled chunk, one call of it (a period; the
     state is donated, so each call continues from the last) and the updates a call makes."""
-    sizes = dataclasses.replace(bench.FULL, period_env_steps=2000 if num_envs == 1 else 4000)
-    cfg = bench.trainer_config(sizes, False, num_envs).replace(backend=backend)
-    compiled, state, hps, _ = bench.compile_trainer(make_train(cfg), 1)
+    sizes = dataclasses.replace(FULL, period_env_steps=2000 if num_envs == 1 else 4000)
+    cfg = trainer_config(sizes, False, num_envs).replace(backend=backend)
+    compiled, state, hps, _ = compile_trainer(make_train(cfg), 1)
     holder = {"state": compiled(state, hps, jnp.int32(0))[0]}  # the warm-up period
 
     def call() -> object:

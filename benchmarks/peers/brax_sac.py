@@ -1,6 +1,6 @@
 """Brax's own SAC trainer on MJX HalfCheetah, timed at every progress call (a `peers` child).
 
-Run by `benchmarks/bench.py --only peers` with the python of a separate virtual environment
+Run by `python -m benchmarks.bench --only peers` with the python of a separate virtual environment
 (jax 0.9.2, brax 0.14.2: Brax's trainers fail on the project's jax 0.10). It imports nothing from
 arld_jax. It prints one JSON line per event on stdout, each prefixed with `PEER_MARKER`:
 
