@@ -4,8 +4,8 @@
         xla_cpu_experimental_ynn_fusion_type=LIBRARY_FUSION_TYPE_DOT
 
 Each argument `name=value` is one variant: the benchmark's update-alone program (`programs.update_call`,
-B 256, 2x256, HalfCheetah's shapes) compiled with `train.compiler_options()` plus that option, beside
-the baseline with `train.compiler_options()` alone. All variants are compiled first, then their calls
+B 256, 2x256, HalfCheetah's shapes) compiled with `compile.compiler_options()` plus that option, beside
+the baseline with `compile.compiler_options()` alone. All variants are compiled first, then their calls
 alternate for `--rounds` rounds, each round starting one variant later, so the VM's drift
 (benchmarks/README.md) touches every variant alike. Printed per variant: whether XLA optimized the
 update to the same HLO as the baseline's (header line aside; an option can still change the machine

@@ -21,7 +21,7 @@ from collections.abc import Callable
 
 import jax
 
-from arld_jax.train import compiler_options
+from arld_jax.compile import compiler_options
 from benchmarks.harness import time_rounds
 
 SIZE = 256  # B = I = O: every operand and product is SIZE x SIZE

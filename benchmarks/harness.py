@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 import jax
 
-from arld_jax.train import compiler_options
+from arld_jax.compile import compiler_options
 
 if TYPE_CHECKING:
     from benchmarks.programs import Sizes

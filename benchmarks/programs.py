@@ -1,6 +1,6 @@
 """The compiled programs the benchmark times, shared by its sections and scripts.
 
-Each builds what the driver builds (`train.compiler_options()`, `train.jit_chunk`), at the sizes
+Each builds what the driver builds (`compile.compiler_options()`, `compile.jit_chunk`), at the sizes
 given: the matmul chain, the env rollout, the update alone, the trainer's periods and the replay's
 work alone.
 """
@@ -18,10 +18,11 @@ import jax
 import jax.numpy as jnp
 
 from arld_jax.agents import Agent, make_agent
+from arld_jax.compile import compiler_options, jit_chunk, over_runs
 from arld_jax.config import Config, hparams_from_config
 from arld_jax.envs import Env
 from arld_jax.replay import PrioritizedReplay
-from arld_jax.train import Trainer, compiler_options, jit_chunk, over_runs
+from arld_jax.train import Trainer
 from arld_jax.types import Transition, example_transition
 from benchmarks.harness import block, summarize
 
@@ -210,7 +211,7 @@ def update_call(
 ) -> tuple[Callable[[], Any], Any]:
     """The update-alone program of `cfg` (`update_scan`, compiled) and a call of it that continues
     from the last call's agents. `num_seeds` > 1 vmaps it over that many agents, one program as in
-    a seed sweep (1: the unvmapped single-run program, as `train.over_runs` runs one seed); every
+    a seed sweep (1: the unvmapped single-run program, as `compile.over_runs` runs one seed); every
     agent starts from the same state and batch, each with its own key."""
     agent, state, batch, weights, hp = agent_and_inputs(cfg, obs_dim, action_dim)
     key = jax.random.key(3)

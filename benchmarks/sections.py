@@ -23,10 +23,11 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
+from arld_jax.compile import compiler_options
 from arld_jax.config import Config, hparams_from_config
 from arld_jax.envs import make_env
 from arld_jax.replay import make_prioritized_replay, replay_nbytes
-from arld_jax.train import Trainer, compiler_options, make_train
+from arld_jax.train import Trainer, make_train
 from arld_jax.types import example_transition
 from benchmarks import flops
 from benchmarks.harness import (
