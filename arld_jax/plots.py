@@ -154,11 +154,7 @@ def _cell_colors(cells: list[Cell]) -> dict[Any, Any]:
 
 def _by_uncertainty(run: Run, cells: list[Cell]) -> list[tuple[str | None, list[Cell]]]:
     """Cells split by uncertainty measure if both are present (intrinsic first), else one group."""
-    present = [
-        u
-        for u in UNCERTAINTIES
-        if any(_field(run, c, "uncertainty") == u for c in cells)
-    ]
+    present = [u for u in UNCERTAINTIES if any(_field(run, c, "uncertainty") == u for c in cells)]
     if len(present) < 2:
         return [(present[0] if present else None, cells)]
     return [(u, [c for c in cells if _field(run, c, "uncertainty") == u]) for u in present]

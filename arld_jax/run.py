@@ -1,8 +1,11 @@
-"""Command line: parsing and validating options into a `Sweep` (or a `SweepGroup`), then
-`arld_jax.driver` trains it (chunks, checkpoints, resume) in the format of `arld_jax.rundir`.
+"""Command line: every command of `python -m arld_jax.run` (COMMANDS; `--help` lists them) and
+its dispatch. Parsing shared with `python -m arld_jax.human` is `arld_jax.cli`'s; a seed_sweep's
+options become a `Sweep` (or a `SweepGroup`), which `arld_jax.driver` trains (chunks, checkpoints,
+resume) in the format of `arld_jax.rundir`.
 
     python -m arld_jax.run seed_sweep [--preset NAME] [--FIELD VALUE[,VALUE...]] [--seeds 0,1,2] [--out DIR]
     python -m arld_jax.run train_expert [--FIELD VALUE] [--seeds 0,1,2] [--out DIR]
+    python -m arld_jax.run demonstrate [--port 8765] [--FIELD VALUE]   (= python -m arld_jax.human)
     python -m arld_jax.run plot RUN_DIR
 
 A comma-separated list for a sweepable field sweeps it inside one compiled program (vmap); the run
@@ -15,206 +18,115 @@ uninterrupted run.
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import difflib
-import inspect
 import json
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
-from arld_jax import config as config_mod
-from arld_jax import driver
-from arld_jax.config import BACKENDS, SWEEPABLE, Config
+from arld_jax import cli, driver
+from arld_jax.config import BACKENDS
+from arld_jax.human import cli as human_cli
 from arld_jax.rundir import CONFIG_FILE, GROUP_FILE
-from arld_jax.sweep import (
-    REPO_ROOT,
-    SHIPPED_EXPERT,
-    SWEEP_PRESETS,
-    Sweep,
-    SweepGroup,
-)
+from arld_jax.sweep import REPO_ROOT, SHIPPED_EXPERT, SWEEP_PRESETS, Sweep, SweepGroup
 
-FIELDS = {f.name: f for f in dataclasses.fields(Config) if f.name != "notes"}
+PROG = "python -m arld_jax.run"
 
 
-def parse_value(name: str, text: str) -> Any:
-    """Parse one command-line value for Config field `name`, by the type of its default."""
-    default = FIELDS[name].default
-    try:
-        if name == "hidden_sizes":
-            return tuple(int(v) for v in text.replace("x", ",").split(",") if v)
-        if name == "expert_path":
-            return None if text.lower() in ("", "none") else text
-        if isinstance(default, bool):
-            if text.lower() in ("1", "true", "yes", "on"):
-                return True
-            if text.lower() in ("0", "false", "no", "off"):
-                return False
-            raise ValueError(text)
-        if isinstance(default, int):
-            return int(text)
-        if isinstance(default, float):
-            return float(text)
-        return text
-    except ValueError:
-        kind = type(default).__name__ if default is not None else "str"
-        raise SystemExit(f"error: --{name} {text!r} is not a valid {kind}") from None
+def expert_preset() -> Sweep:
+    """The `sac` preset (plain SAC, 3 seeds, 100k env steps): how the shipped expert is trained."""
+    base = SWEEP_PRESETS["sac"]()
+    assert isinstance(base, Sweep)
+    return base
 
 
-def _non_negative_int(option: str, text: str) -> int:
-    """An integer >= 0 from the command line, or a clear error naming the option."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = -1
-    if value < 0:
-        raise SystemExit(
-            f"error: --{option} got {text!r}: expected integers >= 0"
-            + (", comma-separated (e.g. --seeds 0,1,2)" if option == "seeds" else "")
-        )
-    return value
+TRAIN_PRESETS: dict[str, Callable[[], Sweep | SweepGroup]] = {
+    "expert": expert_preset,
+    **SWEEP_PRESETS,
+}
+"""`train_expert`'s presets: `expert` (its default) and every sweep preset."""
+
+COMMANDS: dict[str, str] = {
+    "seed_sweep": "train a sweep of runs (cells x seeds) in one compiled program",
+    "train_expert": "train plain SAC over seeds and save the best actor as the expert",
+    "demonstrate": human_cli.SUMMARY,
+    "plot": "(re)draw the figures and summary of a run directory",
+    "compare": "two run directories, cell by cell: a - b of the mean return and P(a > b) with "
+    "95% stratified-bootstrap CIs (rliable)",
+    "export_expert": "save the best run's actor from the latest checkpoint of a plain-SAC run "
+    "as the expert",
+    "evaluate_expert": "roll out a saved expert deterministically on fresh episodes: return "
+    "and gait",
+}
+"""Command -> its one-line description (the top-level --help lists them all)."""
 
 
-def apply_overrides(
-    base: Sweep, overrides: dict[str, str], full_grid: bool = False
-) -> Sweep | SweepGroup:
-    """Apply --FIELD VALUE overrides: a comma list on a sweepable field sweeps it. `full_grid`
-    keeps cells that differ only in fields their strategy ignores (see `sweep.RELEVANT_FOR`).
-    A list of agent families (`--agent sac,td3`) gives a `SweepGroup`: one program per agent."""
-    fields, sweep, seeds = {}, dict(base.sweep), base.seeds
-    agents: tuple[str, ...] = ()
-    for name, text in overrides.items():
-        if name == "agent" and "," in text:
-            agents = tuple(dict.fromkeys(parse_value(name, p) for p in text.split(",") if p))
-            continue
-        if name == "seeds":
-            seeds = tuple(_non_negative_int("seeds", s) for s in text.split(",") if s.strip())
-            continue
-        if name == "num_seeds":
-            seeds = tuple(range(_non_negative_int("num_seeds", text)))
-            continue
-        parts = [p for p in text.split(",")] if name != "hidden_sizes" else [text]
-        values = [parse_value(name, p) for p in parts]
-        if len(values) > 1:
-            if name not in SWEEPABLE:
-                raise SystemExit(
-                    f"error: --{name} got a list ({text}) but {name} sets shapes or program structure "
-                    f"and cannot be swept in one program; sweepable: {', '.join(SWEEPABLE)}"
-                )
-            sweep[name] = tuple(values)
-        else:
-            sweep.pop(name, None)
-            fields[name] = values[0]
-    try:
-        out = Sweep(
-            cfg=base.cfg.replace(**fields),
-            sweep=sweep,
-            seeds=seeds,
-            prune=base.prune and not full_grid,
-        )
-        if len(agents) > 1:
-            return SweepGroup.per_agent(out, agents)
-        if agents:
-            return dataclasses.replace(out, cfg=out.cfg.replace(agent=agents[0]))
-        return out
-    except ValueError as err:
-        raise SystemExit(f"error: {err}") from None
+def _add_training_arguments(p: argparse.ArgumentParser, command: str) -> None:
+    """seed_sweep's and train_expert's options: preset, output, seeds, run options, fields."""
+    presets = SWEEP_PRESETS if command == "seed_sweep" else TRAIN_PRESETS
+    cli.add_preset_option(p, presets, default="default" if command == "seed_sweep" else "expert")
+    p.add_argument("--out", default=None, help="output directory (resumes if it holds this run)")
+    p.add_argument("--seeds", default=None, help="comma-separated seeds, e.g. 0,1,2")
+    p.add_argument("--num_seeds", default=None, help="seeds 0..N-1")
+    cli.add_run_options(p)
+    p.add_argument(
+        "--full_grid",
+        action="store_true",
+        help="keep every combination of the swept lists; by default a cell that differs only in "
+        f"a field its strategy ignores ({cli.pruning_rule()}) is trained once",
+    )
+    cli.add_config_fields(p, lists=True)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    docs = config_mod.field_docs()
+    """The parser of every command (`demonstrate`'s options: `arld_jax.human.cli`)."""
     parser = argparse.ArgumentParser(
-        prog="python -m arld_jax.run",
+        prog=PROG,
         description="ARLD (SAC / Noisy SAC + expert queries) on MJX HalfCheetah.",
+        epilog=f"{PROG} COMMAND --help shows a command's options.",
     )
-    sub = parser.add_subparsers(dest="command", required=True)
-    presets = "; ".join(
-        f"{k}: {inspect.getdoc(v).splitlines()[0]}" for k, v in SWEEP_PRESETS.items()
-    )
-    for name, help_text in (
-        ("seed_sweep", "train a sweep of runs (cells x seeds) in one compiled program"),
-        ("train_expert", "train plain SAC over seeds and save the best actor as the expert"),
-    ):
-        p = sub.add_parser(
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    commands = {}
+    for name, summary in COMMANDS.items():
+        commands[name] = sub.add_parser(
             name,
-            help=help_text,
-            description=help_text + ". A comma list on a sweepable field sweeps it (vmapped).",
-            formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-            epilog=(
-                "Without --preset: " + inspect.getdoc(SWEEP_PRESETS["default"])
-                if name == "seed_sweep"
-                else None
-            ),
+            help=cli.escape(summary),
+            description=cli.paragraph(cli.sentence(summary)),
+            formatter_class=cli.HelpFormatter,
         )
-        p.add_argument(
-            "--preset",
-            default="default" if name == "seed_sweep" else "expert",
-            choices=list(SWEEP_PRESETS) + (["expert"] if name == "train_expert" else []),
-            help=f"named starting point ({presets})",
+    for name in ("seed_sweep", "train_expert"):
+        p = commands[name]
+        p.description = cli.paragraph(
+            cli.sentence(COMMANDS[name]) + " A comma list on a sweepable field sweeps it (vmapped)."
         )
-        p.add_argument(
-            "--out", default=None, help="output directory (resumes if it holds this run)"
-        )
-        p.add_argument("--seeds", default=None, help="comma-separated seeds, e.g. 0,1,2")
-        p.add_argument("--num_seeds", default=None, help="seeds 0..N-1")
-        p.add_argument(
-            "--chunk_periods",
-            type=int,
-            default=None,
-            help="evaluation periods per compiled chunk (checkpoint after each); default: ~10 chunks",
-        )
-        p.add_argument("--no_plots", action="store_true", help="skip the figures")
-        p.add_argument(
-            "--full_grid",
-            action="store_true",
-            help="keep every combination of the swept lists; by default a cell that differs only "
-            "in a field its strategy ignores (b outside bernoulli, t_query outside active, C, "
-            "budget and eps_demo under 'none') is trained once",
-        )
-        p.add_argument(
-            "--stop_after_chunks",
-            type=int,
-            default=None,
-            help="stop after this many chunks (to test resuming)",
-        )
-        group = p.add_argument_group("config fields (sweepable ones accept comma lists)")
-        for field_name, f in FIELDS.items():
-            sweepable = " [sweepable]" if field_name in SWEEPABLE else ""
-            text = f"{docs.get(field_name, '')}{sweepable} (Config default: {f.default!r})"
-            # argparse %-formats help strings, and a docstring may say "12%".
-            group.add_argument(
-                f"--{field_name}", default=None, metavar="V", help=text.replace("%", "%%")
-            )
-    plot = sub.add_parser("plot", help="(re)draw figures and summary of a run directory")
-    plot.add_argument("run_dir")
-    comp = sub.add_parser(
-        "compare",
-        help="two run directories, cell by cell: a - b of the mean return and P(a > b) with 95% "
-        "stratified-bootstrap CIs (rliable)",
+        p.epilog = cli.preset_listing(SWEEP_PRESETS if name == "seed_sweep" else TRAIN_PRESETS)
+        p.usage = cli.usage("[--preset NAME] [--seeds S,S,...] [--out DIR]", lists=True)
+        _add_training_arguments(p, name)
+    human_cli.add_arguments(commands["demonstrate"])  # main hands `demonstrate` to human_cli
+    commands["plot"].add_argument(
+        "run_dir", help="a run directory, or a group's (one program per agent family)"
     )
+    comp = commands["compare"]
     for side in ("a", "b"):
         comp.add_argument(
             f"run_dir_{side}",
             metavar=f"RUN_DIR_{side.upper()}",
-            help="a run directory, or several run with different seeds, comma-separated (pooled)",
+            help="a run directory, or several runs with different seeds, comma-separated (pooled)",
         )
     comp.add_argument(
         "--at", default="", metavar="STEPS", help="also compare at these env steps (comma list)"
     )
     comp.add_argument("--out", default=None, help="also write the table to this markdown file")
-    export = sub.add_parser(
-        "export_expert",
-        help="save the best run's actor from the latest checkpoint of a plain-SAC run as the expert",
+    export = commands["export_expert"]
+    export.add_argument("run_dir", help="a plain-SAC run directory with a checkpoint")
+    export.add_argument("--out", default=None, help=f"expert directory (default {SHIPPED_EXPERT})")
+    check = commands["evaluate_expert"]
+    check.add_argument(
+        "expert_dir", nargs="?", default=str(SHIPPED_EXPERT), help="a saved expert's directory"
     )
-    export.add_argument("run_dir")
-    check = sub.add_parser(
-        "evaluate_expert",
-        help="roll out a saved expert deterministically on fresh episodes: return and gait",
+    check.add_argument(
+        "--episodes", type=int, default=10, help="fresh episodes (at least 2, for the CI)"
     )
-    check.add_argument("expert_dir", nargs="?", default=str(SHIPPED_EXPERT))
-    check.add_argument("--episodes", type=int, default=10)
     check.add_argument("--seed", type=int, default=12345, help="of the initial states")
     check.add_argument(
         "--backend",
@@ -222,51 +134,35 @@ def build_parser() -> argparse.ArgumentParser:
         choices=BACKENDS,
         help="physics to roll out in (default: the one the expert was trained in)",
     )
-    export.add_argument("--out", default=None, help=f"expert directory (default {SHIPPED_EXPERT})")
     return parser
 
 
 def parse_args(argv: list[str]) -> tuple[argparse.Namespace, Sweep | SweepGroup | None]:
-    """Parse the command line; unknown options fail with close matches."""
+    """Parse the command line; unknown options fail with close matches. The Sweep (or group) is
+    None for every command but seed_sweep and train_expert."""
     parser = build_parser()
     args, unknown = parser.parse_known_args(argv)
-    if unknown:
-        options = ["--" + n for n in FIELDS] + ["--preset", "--out", "--seeds", "--num_seeds"]
-        msgs = []
-        for u in unknown:
-            if u.startswith("--"):
-                key = u.split("=")[0]
-                close = difflib.get_close_matches(key, options, n=3, cutoff=0.6)
-                hint = f" (did you mean {', '.join(close)}?)" if close else ""
-                msgs.append(f"unknown option {key}{hint}")
-            else:
-                msgs.append(f"unexpected argument {u!r}")
-        parser.error("; ".join(msgs) + ". See --help for every field.")
-    if args.command in ("plot", "compare", "export_expert", "evaluate_expert"):
+    cli.reject_unknown(cli.command_parser(parser, args.command), unknown)
+    if args.command not in ("seed_sweep", "train_expert"):
         return args, None
-    overrides = {
-        n: getattr(args, n)
-        for n in list(FIELDS) + ["seeds", "num_seeds"]
-        if getattr(args, n, None) is not None
-    }
-    # The expert is trained with the plain-SAC preset (3 seeds, 100k steps).
-    preset = "sac" if args.preset == "expert" else args.preset
-    base = SWEEP_PRESETS[preset]()
+    overrides = cli.field_overrides(args, extra=("seeds", "num_seeds"))
+    base = TRAIN_PRESETS[args.preset]()
     if isinstance(base, SweepGroup):  # a group preset: the overrides apply to every member
         if "agent" in overrides:
             raise SystemExit(
-                f"error: preset {preset!r} names its agents; --agent cannot change them"
+                f"error: preset {args.preset!r} names its agents; --agent cannot change them"
             )
         members = []
         for name, member in base.members:
-            swept = apply_overrides(member, overrides, full_grid=args.full_grid)
+            swept = cli.apply_overrides(member, overrides, full_grid=args.full_grid)
             assert isinstance(swept, Sweep)
             members.append((name, swept))
         return args, SweepGroup(tuple(members))
-    return args, apply_overrides(base, overrides, full_grid=args.full_grid)
+    return args, cli.apply_overrides(base, overrides, full_grid=args.full_grid)
 
 
 def _default_out(command: str, preset: str) -> Path:
+    """runs/<command>-<preset>-<time stamp>: a new directory for a run not given --out."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
     return REPO_ROOT / "runs" / f"{command}-{preset}-{stamp}"
 
@@ -287,7 +183,7 @@ def run_dir_list(arg: str) -> list[Path]:
 
 def compare_command(args: argparse.Namespace) -> None:
     """`compare A B [--at STEPS] [--out FILE]`: print (and write) `results.compare_runs`."""
-    from arld_jax import results
+    from arld_jax import results  # here, not at the top: scipy, which no other command needs
 
     try:
         at = [int(x.replace("_", "")) for x in args.at.split(",") if x.strip()]
@@ -304,7 +200,7 @@ def compare_command(args: argparse.Namespace) -> None:
         raise SystemExit(f"error: {err}") from None
     text = (
         f"# {args.run_dir_a} against {args.run_dir_b}\n\n"
-        f"Command: `python -m arld_jax.run compare {args.run_dir_a} {args.run_dir_b}"
+        f"Command: `{PROG} compare {args.run_dir_a} {args.run_dir_b}"
         + (f" --at {args.at}" if args.at else "")
         + "`. a − b of the mean return over seeds and the probability that a run of a scores "
         f"higher than a run of b, {results.INTERVALS}\n\n" + results.format_comparison(rows) + "\n"
@@ -315,11 +211,10 @@ def compare_command(args: argparse.Namespace) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
+    """Run the command `argv` names (default: the process's arguments)."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv[:1] == ["demonstrate"]:  # a person as the expert, in the browser (arld_jax.human)
-        from arld_jax.human import main as demonstrate_main
-
-        demonstrate_main(argv[1:])
+    if argv[:1] == ["demonstrate"]:  # parsed as by python -m arld_jax.human (also its `clone`)
+        human_cli.main(argv[1:], prog=f"{PROG} demonstrate")
         return
     args, sweep = parse_args(argv)
     if args.command == "export_expert":
@@ -353,14 +248,7 @@ def main(argv: list[str] | None = None) -> None:
         driver.write_results(run_dir, True, print)
         return
     driver.enable_compilation_cache()
-    options = driver.RunOptions(
-        chunk_periods=args.chunk_periods,
-        stop_after_chunks=args.stop_after_chunks,
-        command="python -m arld_jax.run " + " ".join(argv),
-        preset=args.preset,
-        plots=not args.no_plots,
-        log=lambda *a: print(*a, flush=True),
-    )
+    options = cli.run_options(args, command=f"{PROG} {' '.join(argv)}", preset=args.preset)
     if args.command == "train_expert":
         if isinstance(sweep, SweepGroup):
             raise SystemExit("error: train_expert trains the SAC expert: --agent takes no list")

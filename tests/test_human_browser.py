@@ -22,7 +22,8 @@ import numpy as np
 import pytest
 
 from arld_jax.config import Config, tiny
-from arld_jax.human import open_session, run_with_person
+from arld_jax.driver import RunOptions
+from arld_jax.human.cli import open_session, run_with_person
 from arld_jax.human.dataset import HANDED_BACK, PERSON, read_dataset
 from arld_jax.human.server import ServerThread, make_app
 
@@ -74,7 +75,9 @@ class Training:
         def work() -> None:
             try:
                 self.result.update(
-                    run_with_person(cfg, out, self.session, plots=False, log=lambda *a: None)
+                    run_with_person(
+                        cfg, out, self.session, RunOptions(plots=False, log=lambda *a: None)
+                    )
                 )
             except BaseException as err:  # noqa: BLE001
                 self.error.append(err)

@@ -430,7 +430,8 @@ def test_run_with_person_resumes_without_asking_again(tmp_path: Path) -> None:
     """Greedy on the toy env, 2 envs: the replay's demonstrations are exactly the person's actions;
     after a crash mid-chunk, the rerun resumes from the checkpoint, replays the steps answered
     since from the dataset (same states), and asks only the rest."""
-    from arld_jax.human import open_session, run_with_person
+    from arld_jax.driver import RunOptions
+    from arld_jax.human.cli import open_session, run_with_person
 
     # 5 iterations (10 env steps) per chunk; greedy asks at iterations 0-7 (16 steps, C = 3).
     cfg = tiny(
@@ -453,16 +454,17 @@ def test_run_with_person_resumes_without_asking_again(tmp_path: Path) -> None:
         return data.obs[data.is_demo == 1], data.action[data.is_demo == 1]
 
     # The person's process dies after 12 answers: 10 in chunk 1 (checkpointed), 2 in chunk 2.
+    options = RunOptions(chunk_periods=1, plots=False, log=quiet)
     broken = tmp_path / "broken"
     broken.mkdir()
     session = open_session(cfg, broken, quiet)
     AutoPerson(session, stop_after=12)
     with pytest.raises(Exception):  # noqa: B017 (XLA wraps the callback's SessionClosed)
-        run_with_person(cfg, broken, session, chunk_periods=1, plots=False, log=quiet)
+        run_with_person(cfg, broken, session, options)
     assert len(read_dataset(broken / DATASET_FILE)[1]) == 12
     session = open_session(cfg, broken, quiet)
     AutoPerson(session)
-    result = run_with_person(cfg, broken, session, chunk_periods=1, plots=False, log=quiet)
+    result = run_with_person(cfg, broken, session, options)
     session.close()
     assert result["complete"]
     assert session.counts == {"asked": 4, "replayed": 2, "handed_back": 0}

@@ -12,7 +12,7 @@ import jax
 import numpy as np
 import pytest
 
-from arld_jax import driver, plots, results, run, rundir
+from arld_jax import cli, driver, plots, results, run, rundir
 from arld_jax.sweep import Sweep, SweepGroup, preset_tiny
 
 REPO = Path(__file__).resolve().parents[1]
@@ -165,7 +165,7 @@ def test_help_documents_every_field(capsys):
     with pytest.raises(SystemExit):
         run.parse_args(["seed_sweep", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    for name in run.FIELDS:
+    for name in cli.FIELDS:
         assert f"--{name}" in text, name
     assert "Proportion threshold of the active strategy" in text
     assert "(Config default: 0.1)" in text

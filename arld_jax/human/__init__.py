@@ -1,4 +1,4 @@
-"""A person as the expert, in the browser (issue 13; the paper's demonstration UI, appendix A.3).
+"""A person as the expert, in the browser (the paper's demonstration UI, appendix A.3).
 
     python -m arld_jax.run demonstrate --port 8765 --strategy active --uncertainty intrinsic
     (the same as python -m arld_jax.human ...)
@@ -20,23 +20,12 @@ proposed action and its uncertainty, the strategy, the budget left and step k of
 
 Modules: `session` (the thread-safe meeting point and the request validation), `server` (Starlette
 app, uvicorn thread, 127.0.0.1 only), `expert` (the io_callback expert; behaviour cloning of a
-recorded set into a saved expert for `--expert_path`), `dataset`, `frames`, `cli`.
+recorded set into a saved expert for `--expert_path`), `dataset`, `frames`, `cli` (the command
+line; `cli.run_with_person` trains a run with the person at a `cli.open_session`). This package
+imports none of them, so `dataset` and `session` (numpy only) load without JAX.
 
 Every iteration reaches the page through the expert's `observe` hook (`make_observer`), so the
 frames before a query's first step are the states the agent just visited, and a pause holds the run
 at the next iteration. A hand-back answers with a row of NaNs: the loop cancels the rest of the
 query, returns its budget and stores those steps as the agent's (not is_demo).
 """
-
-from arld_jax.human.cli import human_config, main, open_session, run_with_person
-from arld_jax.human.expert import clone_expert, make_human_expert, make_observer
-
-__all__ = [
-    "clone_expert",
-    "human_config",
-    "main",
-    "make_human_expert",
-    "make_observer",
-    "open_session",
-    "run_with_person",
-]

@@ -1,4 +1,5 @@
-"""`python -m arld_jax.human`: train one run with a person as the expert, in the browser.
+"""`python -m arld_jax.human` (also `python -m arld_jax.run demonstrate`): train one run with a
+person as the expert, in the browser.
 
     python -m arld_jax.human [--port 8765] [--out DIR] [--preset human] [--FIELD VALUE ...]
     python -m arld_jax.human clone RUN_DIR_OR_DATASET --out EXPERT_DIR [--hidden_sizes 64,64]
@@ -7,7 +8,7 @@ The first starts the page's server on 127.0.0.1 (printing its address) and train
 Config describes (any `seed_sweep` field override, one value each) chunk by chunk, checkpointed like
 `run.py`'s; rerunning the same command resumes, and demonstrations already given are replayed from
 the dataset, not asked again. The second behaviour-clones a recorded demonstration set into an
-expert for `--expert_path`.
+expert for `--expert_path`. The options shared with `run.py` are `arld_jax.cli`'s.
 """
 
 from __future__ import annotations
@@ -16,19 +17,35 @@ import argparse
 import dataclasses
 import hashlib
 import json
+import logging
 import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import jax
 import numpy as np
 
-from arld_jax.config import Config
+from arld_jax import cli
+from arld_jax.config import STRATEGIES, Config
+from arld_jax.driver import ChunkHooks, RunOptions, enable_compilation_cache, run_sweep
+from arld_jax.envs import make_env
 from arld_jax.human.dataset import DATASET_FILE, DemoDataset
+from arld_jax.human.frames import halfcheetah_action_names, halfcheetah_frame
+from arld_jax.human.server import ServerThread, make_app
 from arld_jax.human.session import DemoSession, RunInfo
+from arld_jax.sweep import REPO_ROOT, SWEEP_PRESETS, Sweep
 
+PROG = "python -m arld_jax.human"
 DEFAULT_PORT = 8765
+SUMMARY = "train one run with you as the expert, in the browser"
+"""The command's one line (also in `python -m arld_jax.run --help`, as `demonstrate`)."""
+DESCRIPTION = cli.paragraph(
+    cli.sentence(SUMMARY) + " A page on 127.0.0.1 asks for your action whenever the query "
+    "strategy hands control to the expert. Rerun the same command to resume; demonstrations "
+    "already given are replayed, not asked again."
+)
 
 
 def human_config(**overrides: Any) -> Config:
@@ -56,12 +73,8 @@ def human_config(**overrides: Any) -> Config:
 
 def run_info(cfg: Config) -> RunInfo:
     """What the page shows about `cfg`'s run."""
-    from arld_jax.envs import make_env
-
     env = make_env(cfg)
     if cfg.env_name == "halfcheetah":
-        from arld_jax.human.frames import halfcheetah_action_names
-
         names = tuple(halfcheetah_action_names())
     else:
         names = tuple(f"a{i}" for i in range(env.action_dim))
@@ -87,46 +100,31 @@ def open_session(cfg: Config, out: Path, log: Callable[..., None] = print) -> De
     header = {"env_name": info.env_name, "obs_dim": info.obs_dim, "action_dim": info.action_dim}
     header["action_names"] = list(info.action_names)
     dataset = DemoDataset(out / DATASET_FILE, header)
-    frame_fn = None
-    if cfg.env_name == "halfcheetah":
-        from arld_jax.human.frames import halfcheetah_frame
-
-        frame_fn = halfcheetah_frame
+    frame_fn = halfcheetah_frame if cfg.env_name == "halfcheetah" else None
     return DemoSession(info, dataset, frame_fn=frame_fn, log=log)
 
 
 def check_single_run(cfg: Config) -> None:
     """A person demonstrates one run with a strategy that asks."""
     if cfg.strategy == "none":
-        raise SystemExit(
-            "error: --strategy none never asks the person; use greedy, bernoulli or active"
-        )
+        asking = [s for s in STRATEGIES if s != "none"]
+        raise SystemExit(f"error: --strategy none never asks the person; use {', '.join(asking)}")
 
 
 def run_with_person(
-    cfg: Config,
-    out: Path,
-    session: DemoSession,
-    chunk_periods: int | None = None,
-    stop_after_chunks: int | None = None,
-    command: str = "",
-    preset: str = "",
-    plots: bool = True,
-    log: Callable[..., None] = print,
+    cfg: Config, out: Path, session: DemoSession, options: RunOptions
 ) -> dict[str, Any]:
-    """Train `cfg`'s run into `out` with the person at `session` as the expert; resumable.
+    """Train `cfg`'s run into `out` with the person at `session` as the expert, driven as
+    `options` say (chunks, early stop, figures, log); resumable.
 
     The driver is `arld_jax.driver.run_sweep` itself, unbatched (the person's ordered io_callback
     cannot be vmapped, and the lax.cond around it must stay a branch), so the run directory is an
     ordinary one (one run) plus the dataset; the session follows the chunks through `ChunkHooks`.
     Returns {"state": final TrainState (no run axis), "metrics", "complete", "timing"}."""
-    import jax
-
-    from arld_jax.driver import ChunkHooks, run_sweep
-    from arld_jax.human.expert import make_human_expert
-    from arld_jax.sweep import Sweep
+    from arld_jax.human.expert import make_human_expert  # flax.linen: only when training
 
     check_single_run(cfg)
+    log = options.log
 
     def after_chunk(c: int, num_chunks: int, m: Any) -> None:
         done = int(np.asarray(m.env_steps)[0, -1])
@@ -159,11 +157,11 @@ def run_with_person(
     result = run_sweep(
         Sweep(cfg=cfg, seeds=(cfg.seed,)),
         out,
-        chunk_periods,
-        stop_after_chunks,
-        command=command,
-        preset=preset,
-        plots=plots,
+        options.chunk_periods,
+        options.stop_after_chunks,
+        command=options.command,
+        preset=options.preset,
+        plots=options.plots,
         log=log,
         expert=make_human_expert(session),
         vmapped=False,
@@ -178,63 +176,67 @@ def run_with_person(
 # ---------------------------------------------------------------- command line
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Options: the page's port and run.py's seed_sweep options (one value per field)."""
-    from arld_jax.run import FIELDS, field_docs
-    from arld_jax.sweep import SWEEP_PRESETS
+def human_preset() -> Sweep:
+    """AQSAC on MJX HalfCheetah sized for one person's afternoon (`human_config`): 1 env, 8k env
+    steps, t_query 0.1, C 5, budget 200."""
+    return Sweep(cfg=human_config(), seeds=(0,))
 
-    docs = field_docs()
-    parser = argparse.ArgumentParser(
-        prog="python -m arld_jax.human",
-        description="Train one run with you as the expert: a local page asks for your action "
-        "whenever the query strategy hands control to the expert.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-    )
+
+PRESETS = {"human": human_preset, **SWEEP_PRESETS}
+"""The starting Configs a person can demonstrate: `human` (the default) and every sweep preset."""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Make `parser` (a new one, or `run.py`'s `demonstrate`) this command's: its description,
+    epilog and options: the page's port, the preset and run directory, how the run is driven, and
+    every Config field (one value each)."""
+    parser.description = DESCRIPTION
+    parser.epilog = epilog(parser.prog)
+    parser.usage = cli.usage("[--port PORT] [--preset NAME] [--out DIR]", lists=False)
     parser.add_argument("--port", type=int, default=DEFAULT_PORT, help="port on 127.0.0.1")
+    cli.add_preset_option(parser, PRESETS, default="human")
     parser.add_argument(
-        "--preset",
-        default="human",
-        choices=["human", *SWEEP_PRESETS],
-        help="starting Config (human: AQSAC, 1 env, 8k steps, C 5, budget 200)",
+        "--out", default=None, help="run directory (default: runs/demonstrate-..., from the config)"
     )
-    parser.add_argument("--out", default=None, help="run directory (default: from the config)")
-    parser.add_argument("--chunk_periods", type=int, default=None, help="periods per checkpoint")
-    parser.add_argument("--stop_after_chunks", type=int, default=None, help=argparse.SUPPRESS)
-    parser.add_argument("--no_plots", action="store_true", help="skip the figures")
-    group = parser.add_argument_group("config fields (one value each)")
-    for name, f in FIELDS.items():
-        group.add_argument(
-            f"--{name}",
-            default=None,
-            metavar="V",
-            help=f"{docs.get(name, '')} (default {f.default!r})",
-        )
+    cli.add_run_options(parser)
+    cli.add_config_fields(parser, lists=False)
+
+
+def epilog(prog: str) -> str:
+    """The presets, and the `clone` command (parsed apart, by `clone_main`)."""
+    clone = cli.paragraph(
+        f"behaviour-clone the demonstrations recorded in a run directory (its {DATASET_FILE}) "
+        f"into an expert for --expert_path; {prog} clone --help for its options",
+        "    ",
+    )
+    return (
+        cli.preset_listing(PRESETS)
+        + "\n\nalso:\n  clone RUN_DIR_OR_DATASET --out EXPERT_DIR\n"
+        + clone
+    )
+
+
+def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
+    """The command line of a person's run."""
+    parser = argparse.ArgumentParser(prog=prog, formatter_class=cli.HelpFormatter)
+    add_arguments(parser)
     return parser
 
 
-def parse_args(argv: list[str]) -> tuple[argparse.Namespace, Config]:
-    """The options and the run's Config (overrides as in run.py's `apply_overrides`)."""
-    from arld_jax.run import FIELDS, apply_overrides
-    from arld_jax.sweep import SWEEP_PRESETS, Sweep
-
-    parser = build_parser()
+def parse_args(argv: list[str], prog: str = PROG) -> tuple[argparse.Namespace, Config]:
+    """The options and the run's Config (overrides as in `cli.apply_overrides`, one value each).
+    A sweep preset other than `human` demonstrates with the active strategy unless --strategy
+    says otherwise (its own may not query)."""
+    parser = build_parser(prog)
     args, unknown = parser.parse_known_args(argv)
-    if unknown:
-        import difflib
-
-        options = [a for action in parser._actions for a in action.option_strings]  # noqa: SLF001
-        hints = []
-        for u in unknown:
-            close = difflib.get_close_matches(u.split("=")[0], options, n=3, cutoff=0.6)
-            hints.append(f"{u}" + (f" (did you mean {', '.join(close)}?)" if close else ""))
-        parser.error("unknown argument(s): " + "; ".join(hints))
-    overrides = {n: getattr(args, n) for n in FIELDS if getattr(args, n) is not None}
-    base = (
-        Sweep(cfg=human_config(), seeds=(0,))
-        if args.preset == "human"
-        else SWEEP_PRESETS[args.preset]()
-    )
-    sweep = apply_overrides(base, overrides)
+    cli.reject_unknown(parser, unknown)
+    overrides = cli.field_overrides(args)
+    base = PRESETS[args.preset]()
+    if not isinstance(base, Sweep):
+        raise SystemExit(
+            f"error: preset {args.preset!r} is one program per agent; a person demonstrates one run"
+        )
+    sweep = cli.apply_overrides(base, overrides)
     if not isinstance(sweep, Sweep):
         raise SystemExit("error: a person demonstrates one run: give one value for --agent")
     if sweep.sweep:
@@ -251,21 +253,24 @@ def parse_args(argv: list[str]) -> tuple[argparse.Namespace, Config]:
 def default_out(cfg: Config) -> Path:
     """runs/demonstrate-<env>-<strategy>-seed<seed>-<hash of the config>: the same command maps
     to the same directory, so rerunning it resumes."""
-    from arld_jax.sweep import REPO_ROOT
-
     text = json.dumps(dataclasses.asdict(cfg), sort_keys=True, default=str)
     digest = hashlib.sha256(text.encode()).hexdigest()[:8]
     return REPO_ROOT / "runs" / f"demonstrate-{cfg.env_name}-{cfg.strategy}-seed{cfg.seed}-{digest}"
 
 
-def clone_main(argv: list[str]) -> Path:
+def clone_main(argv: list[str], prog: str = PROG) -> Path:
     """`clone RUN_DIR_OR_DATASET --out DIR`: behaviour-clone a recorded demonstration set."""
-    from arld_jax.human.expert import clone_expert
+    from arld_jax.human.expert import clone_expert  # flax.linen and optax: only when cloning
 
-    parser = argparse.ArgumentParser(prog="python -m arld_jax.human clone")
+    parser = argparse.ArgumentParser(
+        prog=f"{prog} clone",
+        description="Behaviour-clone a recorded demonstration set into an expert for "
+        "--expert_path.",
+        formatter_class=cli.HelpFormatter,
+    )
     parser.add_argument("dataset", help=f"a run directory or its {DATASET_FILE}")
     parser.add_argument("--out", required=True, help="expert directory to write")
-    parser.add_argument("--hidden_sizes", default="64,64")
+    parser.add_argument("--hidden_sizes", default="64,64", help="the actor's hidden layers")
     parser.add_argument("--steps", type=int, default=2_000, help="Adam steps (full batch)")
     args = parser.parse_args(argv)
     path = Path(args.dataset)
@@ -282,19 +287,18 @@ def clone_main(argv: list[str]) -> Path:
     return Path(args.out)
 
 
-def main(argv: list[str] | None = None) -> None:
-    """Serve the page and train; Ctrl-C stops (rerun the same command to resume)."""
+def main(argv: list[str] | None = None, prog: str = PROG) -> None:
+    """Serve the page and train; Ctrl-C stops (rerun the same command to resume). `prog`: how the
+    command was invoked (`python -m arld_jax.run demonstrate` also lands here)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["clone"]:
-        clone_main(argv[1:])
+        clone_main(argv[1:], prog)
         return
-    from arld_jax.driver import enable_compilation_cache
-    from arld_jax.human.server import ServerThread, make_app
-
-    args, cfg = parse_args(argv)
+    args, cfg = parse_args(argv, prog)
     out = Path(args.out) if args.out else default_out(cfg)
     enable_compilation_cache()
-    log = lambda *a: print(*a, flush=True)  # noqa: E731
+    options = cli.run_options(args, command=f"{prog} {' '.join(argv)}", preset=args.preset)
+    log = options.log
     out.mkdir(parents=True, exist_ok=True)
     session = open_session(cfg, out, log)
     server = ServerThread(make_app(session), args.port).start()
@@ -305,19 +309,7 @@ def main(argv: list[str] | None = None) -> None:
 
     def train() -> None:
         try:
-            result.update(
-                run_with_person(
-                    cfg,
-                    out,
-                    session,
-                    args.chunk_periods,
-                    args.stop_after_chunks,
-                    command="python -m arld_jax.human " + " ".join(argv),
-                    preset=args.preset,
-                    plots=not args.no_plots,
-                    log=log,
-                )
-            )
+            result.update(run_with_person(cfg, out, session, options))
         except BaseException as err:  # reported by the main thread
             errors.append(err)
             session.set_status("error", error=str(err).splitlines()[0] if str(err) else repr(err))
@@ -331,8 +323,6 @@ def main(argv: list[str] | None = None) -> None:
             worker.join(timeout=0.5)
     except KeyboardInterrupt:
         log("stopping: rerun the same command to resume (given demonstrations are kept)")
-        import logging
-
         logging.getLogger("jax._src.callback").setLevel(logging.CRITICAL)  # the expected abort
         session.close()
         worker.join()
