@@ -113,18 +113,17 @@ class Config(*AGENT_OPTIONS):
     """Gradient updates per env step (paper: 1). With num_envs envs, num_envs * this updates run per
     iteration; the product must be a whole number."""
     update_before_add: bool = False
-    """Performance experiment: run an iteration's gradient updates on the replay as it was before
-    that iteration's transitions are added (they become sampleable one iteration later), so the
-    updates do not wait for the env step. Measured on the 2-core CPU with MJX (`benchmarks/bench.py
-    --only overlap`) it is SLOWER at 1 env (0.69x, 0.64x on two hosts) and mixed at 16 envs (0.96x,
-    1.09x), though 1.4x faster on the toy env; hence off. Kept for accelerators, where the overlap may pay."""
+    """Run an iteration's gradient updates on the replay as it was before that iteration's
+    transitions are added (they become sampleable one iteration later), so the updates need not
+    wait for the env step. Off: on a 2-core CPU it is slower at 1 env (`python -m benchmarks.bench
+    --only overlap`, benchmarks/README.md); an accelerator may overlap the two."""
     noisy_sigma_init: float = 0.017
     """Initial sigma_w, sigma_b of the Noisy SAC mean head (Fortunato et al. 2017, independent noise)."""
     noisy_runs: bool = True
     """Whether the compiled program may hold a noisy agent (Noisy SAC / Noisy TD3: a run with
     uncertainty 'extrinsic'). False builds the actor's mean head without its weight-noise draws: the
     same parameters and, since plain runs scale that noise by 0, bit-identical results, in about an
-    eighth less update time on the 2-core CPU (benchmarks/README.md, "Session 8"). Sweeps set it for their
+    eighth less update time on the 2-core CPU (benchmarks/README.md, "Brax's SAC trainer against arld_jax, side by side"). Sweeps set it for their
     program (`Sweep.program_config`: False when no run is noisy); False with uncertainty 'extrinsic'
     is an error."""
     matmul_dtype: str = "float32"
@@ -460,14 +459,8 @@ def halfcheetah(**overrides: Any) -> Config:
 def paper(**overrides: Any) -> Config:
     """The paper's protocol (appendix A.1): 400k steps, 1 env, budget 10k, N_r 5k, eval every 5k."""
     base: dict[str, Any] = dict(
-        total_env_steps=400_000,
-        replay_capacity=400_000,
-        budget=10_000,
-        window_size=5_000,
-        eval_every=5_000,
-        num_envs=1,
-        num_eval_episodes=10,
-    )
+        total_env_steps=400_000, replay_capacity=400_000, num_eval_episodes=10
+    )  # budget 10k, N_r 5k, eval every 5k and 1 env are the defaults
     base.update(overrides)
     return Config(**base)
 

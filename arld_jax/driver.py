@@ -24,9 +24,12 @@ from arld_jax.agents import REGISTRY
 from arld_jax.config import Config
 from arld_jax.rundir import (
     CHECKPOINT_DIR,
+    CONFIG_FILE,
     GROUP_FILE,
     LAYOUT_FILE,
     METRICS_FILE,
+    RUNS_FILE,
+    TIMING_FILE,
     check_layout,
     check_or_write_identity,
     checkpoint_key,
@@ -86,18 +89,15 @@ class ChunkHooks:
 def run_sweep(
     sweep: Sweep,
     out: Path,
-    chunk_periods: int | None = None,
-    stop_after_chunks: int | None = None,
-    command: str = "",
-    preset: str = "",
-    plots: bool = True,
-    log=print,  # noqa: ANN001
+    options: RunOptions = RunOptions(),
+    *,
     expert: Any = None,
     vmapped: bool = True,
     hooks: ChunkHooks | None = None,
     record: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Train every run of `sweep` into `out`, resuming from its checkpoint if there is one.
+    """Train every run of `sweep` into `out` as `options` say, resuming from its checkpoint if
+    there is one.
 
     `expert` replaces the one `cfg.expert_path` names; `vmapped=False` trains the sweep's single
     run without vmap (on a run axis of 1: the same files), for an expert that cannot be batched.
@@ -113,6 +113,7 @@ def run_sweep(
 
     cfg = sweep.cfg
     hooks = hooks or ChunkHooks()
+    log = options.log
     if not vmapped and sweep.num_runs != 1:
         raise ValueError(f"an unbatched run_sweep trains one run, this sweep has {sweep.num_runs}")
     if expert is None and sweep.needs_expert():
@@ -122,15 +123,15 @@ def run_sweep(
     identity = (
         sweep.to_json()
         | {
-            "preset": preset,
-            "command": command,
+            "preset": options.preset,
+            "command": options.command,
             "expert": expert.meta if expert is not None else None,
             "devices": [str(d) for d in jax.devices()],
         }
         | (record or {})
     )
     resumed = check_or_write_identity(out, identity)
-    (out / "runs.json").write_text(json.dumps(sweep.runs(), indent=1) + "\n")
+    (out / RUNS_FILE).write_text(json.dumps(sweep.runs(), indent=1) + "\n")
 
     # Runs axis, padded to a multiple of the device count and sharded over devices.
     hps, keys = sweep.hparams_and_keys()
@@ -143,7 +144,7 @@ def run_sweep(
     sharding = NamedSharding(mesh, PartitionSpec("runs"))
     hps, keys = jax.device_put((hps, keys), sharding)
 
-    chunk = choose_chunk(cfg.num_evals, chunk_periods)
+    chunk = choose_chunk(cfg.num_evals, options.chunk_periods)
     num_chunks = cfg.num_evals // chunk
     init = jax.jit(over_runs(trainer.init, vmapped), out_shardings=sharding)
     run_chunk = jit_chunk(trainer, vmapped=vmapped)
@@ -208,7 +209,7 @@ def run_sweep(
             f"eval return {latest:.1f} (mean of runs)"
         )
         hooks.after_chunk(c, num_chunks, m)
-        if stop_after_chunks is not None and chunks_this_call >= stop_after_chunks:
+        if options.stop_after_chunks is not None and chunks_this_call >= options.stop_after_chunks:
             break
     complete = metrics and metrics["eval_return"].shape[1] == cfg.num_evals
     timing = {
@@ -224,8 +225,8 @@ def run_sweep(
         "devices": len(devices),
     } | hooks.timing()
     if complete:
-        (out / "timing.json").write_text(json.dumps(timing, indent=2) + "\n")
-        write_results(out, plots, log)
+        (out / TIMING_FILE).write_text(json.dumps(timing, indent=2) + "\n")
+        write_results(out, options.plots, log)
     return {"metrics": metrics, "complete": bool(complete), "state": state, "timing": timing}
 
 
@@ -250,14 +251,14 @@ def expert_for(cfg: Config):  # noqa: ANN202
 
 
 def write_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
-    from arld_jax import results
+    from arld_jax import compare, summary
 
-    csv_path, md_path = results.write_summary(out)
+    csv_path, md_path = summary.write_summary(out)
     log(md_path.read_text())
-    comparison = results.write_comparison(out)
+    comparison = compare.write_comparison(out)
     if comparison is not None:
         log(comparison.read_text())
-    log(results.plain_reading(out))
+    log(compare.plain_reading(out))
     if plots:
         from arld_jax import plots as plots_mod
 
@@ -268,16 +269,7 @@ def write_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
 def run_and_report(sweep: Sweep, out: Path, options: RunOptions) -> dict[str, Any]:
     """`run_sweep` with `options`, saying where the results are or how to resume."""
     options.log(f"output directory: {out}")
-    result = run_sweep(
-        sweep,
-        out,
-        options.chunk_periods,
-        options.stop_after_chunks,
-        command=options.command,
-        preset=options.preset,
-        plots=options.plots,
-        log=options.log,
-    )
+    result = run_sweep(sweep, out, options)
     if result["complete"]:
         options.log(f"results in {out}")
     else:
@@ -307,7 +299,7 @@ def export_expert(run_dir: Path, out: Path) -> Path:
     from arld_jax.expert import save_expert
     from arld_jax.train import make_train
 
-    saved = json.loads((run_dir / "config.json").read_text())
+    saved = json.loads((run_dir / CONFIG_FILE).read_text())
     cfg_dict = dict(saved["config"], hidden_sizes=tuple(saved["config"]["hidden_sizes"]))
     cfg = Config(**cfg_dict)
     if not REGISTRY[cfg.agent].exports_expert:
@@ -339,7 +331,7 @@ def export_expert(run_dir: Path, out: Path) -> Path:
     actor_template = template.agent.actor_params
     actor = jax.tree.unflatten(jax.tree.structure(actor_template), actor_flat)
     env = make_env(cfg)
-    runs = json.loads((run_dir / "runs.json").read_text())
+    runs = json.loads((run_dir / RUNS_FILE).read_text())
     env_steps = int(metrics["env_steps"][best, periods - 1])
     meta = {
         "env_name": cfg.env_name,
@@ -373,7 +365,7 @@ def export_expert(run_dir: Path, out: Path) -> Path:
 def run_group(group: SweepGroup, out: Path, options: RunOptions) -> bool:
     """Train each member of `group` (one compiled program each) into `out/<member>`, one after
     another; a finished member is not run again, an unfinished one resumes. Then the combined
-    summary (`results.write_group_summary`) and figure. Returns True when all are complete."""
+    summary (`summary.write_group_summary`) and figure. Returns True when all are complete."""
     out.mkdir(parents=True, exist_ok=True)
     names = [name for name, _ in group.members]
     path = out / GROUP_FILE
@@ -386,7 +378,7 @@ def run_group(group: SweepGroup, out: Path, options: RunOptions) -> bool:
     complete = True
     for name, sweep in group.members:
         member = out / name
-        if (member / "timing.json").exists():  # written only when a run directory is complete
+        if (member / TIMING_FILE).exists():  # written only when a run directory is complete
             options.log(f"{member}: complete")
             continue
         result = run_and_report(sweep, member, options)
@@ -399,9 +391,9 @@ def run_group(group: SweepGroup, out: Path, options: RunOptions) -> bool:
 
 
 def write_group_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
-    from arld_jax import results
+    from arld_jax import summary
 
-    _, md_path = results.write_group_summary(out)
+    _, md_path = summary.write_group_summary(out)
     log(md_path.read_text())
     if plots:
         from arld_jax import plots as plots_mod
@@ -421,7 +413,7 @@ def evaluate_expert(
     from arld_jax.envs import make_env
     from arld_jax.evaluate import rollout
     from arld_jax.expert import load_expert, read_expert_meta
-    from arld_jax.results import mean_ci95
+    from arld_jax.stats import mean_ci95
 
     meta = read_expert_meta(path)
     cfg = Config(env_name=meta["env_name"], backend=backend or meta.get("backend", "mjx"))

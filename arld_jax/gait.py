@@ -16,7 +16,7 @@ HALFCHEETAH_PITCH_INDEX = 1
 """Index of the root's pitch angle in Brax's halfcheetah observation."""
 
 LATE_FRACTION = 0.3
-"""The gait is judged on the last 30% of training (the learning issue's criterion)."""
+"""The gait is judged on the last 30% of training (late in training, where a flipped gait has settled)."""
 
 
 def upside_down(obs: Any, xp: Any = np) -> Any:

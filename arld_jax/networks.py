@@ -30,12 +30,12 @@ def head_matmul(x: jax.Array, w: jax.Array) -> jax.Array:
 
     The same product; only the weight gradient is computed differently. d/dw = x^T g contracts
     the batch axis, the leading axis of both operands, and XLA:CPU hands that dot to its generic
-    kernel (`benchmarks/dot_layouts.py`), which is slow when the output has few columns: 75 us for
+    kernel (`python -m benchmarks.dot_layouts`), which is slow when the output has few columns: 75 us for
     256x256x6, where the forward x @ w takes 11 us. Writing x^T out first (`optimization_barrier`
     keeps XLA from folding the transpose back into the dot) turns it into a plain row-major
     product: 36 us. Both heads of `Actor` read the same phi, so XLA computes its transpose once.
-    The whole 16-env trainer ran 1.10-1.12x faster with it (benchmarks/README.md, "Session 14");
-    on the 256-wide hidden layers the same form made the update slower (0.94-0.97x, "Session 17"),
+    The whole 16-env trainer ran 1.10-1.12x faster with it (benchmarks/README.md, "Where the update's time went, and three changes");
+    on the 256-wide hidden layers the same form made the update slower (0.94-0.97x, "Why the weight gradients are the slow dots, and why that does not help"),
     so only the heads use it. On a GPU it costs one small transpose. Not bit-identical
     to autodiff's x^T g (another summation order over the batch); learning with it is checked in
     experiments/README.md."""
@@ -168,7 +168,7 @@ class TwinCritic(nn.Module):
 
     Two separate QNetworks (parameters `q0`, `q1`), not one `nn.vmap`-stacked ensemble: on XLA:CPU
     the stacked form's batched weight-gradient dots are slower, and separate critics made the
-    whole update ~10% faster here (benchmarks/README.md, "Session 3").
+    whole update ~10% faster here (benchmarks/README.md, "Separate twin critics, a full run on another host").
     """
 
     hidden_sizes: Sequence[int] = (256, 256)

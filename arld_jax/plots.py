@@ -1,7 +1,7 @@
 """The paper's figures (section 4, appendix A.2) from a sweep's run directory: numpy + matplotlib.
 
 `plot_all(run_dir)` writes PNGs into ``run_dir/figures/`` and skips the figures the run has no data
-for. Each ``fig*`` function takes the dict of `arld_jax.results.load_run` and returns a matplotlib
+for. Each ``fig*`` function takes the dict of `arld_jax.rundir.load_run` and returns a matplotlib
 `Figure`, or None when there is nothing to plot.
 
 Figures are drawn on the Agg canvas directly (``Figure`` + ``FigureCanvasAgg``), never through
@@ -26,18 +26,17 @@ from matplotlib.ticker import EngFormatter
 
 from arld_jax.agents import REGISTRY
 from arld_jax.config import UNCERTAINTIES, paper_name
-from arld_jax.results import (
+from arld_jax.rundir import (
     Cell,
     RunDir,
     env_steps_axis,
     expert_return,
     group_cells,
     load_run,
-    mean_ci95,
-    mean_ci95_columns,
     run_field,
     swept_fields,
 )
+from arld_jax.stats import mean_ci95, mean_ci95_columns
 
 DPI = 110
 SMOOTH_WINDOW = 5
@@ -574,7 +573,7 @@ def plot_all(run_dir: str | Path) -> list[Path]:
 def plot_group(group_dir: str | Path) -> Path:
     """Fig. 1 shape: final evaluation return (mean and 95% CI over seeds) of every cell of every
     member of a group, one panel per agent family. Writes group_dir/figures/fig1_agents.png."""
-    from arld_jax.results import summarize_group
+    from arld_jax.summary import summarize_group
 
     group_dir = Path(group_dir)
     rows = summarize_group(group_dir)

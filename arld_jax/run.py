@@ -182,8 +182,11 @@ def run_dir_list(arg: str) -> list[Path]:
 
 
 def compare_command(args: argparse.Namespace) -> None:
-    """`compare A B [--at STEPS] [--out FILE]`: print (and write) `results.compare_runs`."""
-    from arld_jax import results  # here, not at the top: scipy, which no other command needs
+    """`compare A B [--at STEPS] [--out FILE]`: print (and write) `compare.compare_runs`."""
+    from arld_jax import (  # here, not at the top: scipy, which no other command needs
+        compare,
+        rundir,
+    )
 
     try:
         at = [int(x.replace("_", "")) for x in args.at.split(",") if x.strip()]
@@ -194,8 +197,8 @@ def compare_command(args: argparse.Namespace) -> None:
     for d in sides[0] + sides[1]:
         require_run_dir(d)
     try:
-        a, b = (results.pool_runs(dirs) for dirs in sides)
-        rows = results.compare_runs(a, b, at)
+        a, b = (rundir.pool_runs(dirs) for dirs in sides)
+        rows = compare.compare_runs(a, b, at)
     except ValueError as err:
         raise SystemExit(f"error: {err}") from None
     text = (
@@ -203,7 +206,7 @@ def compare_command(args: argparse.Namespace) -> None:
         f"Command: `{PROG} compare {args.run_dir_a} {args.run_dir_b}"
         + (f" --at {args.at}" if args.at else "")
         + "`. a − b of the mean return over seeds and the probability that a run of a scores "
-        f"higher than a run of b, {results.INTERVALS}\n\n" + results.format_comparison(rows) + "\n"
+        f"higher than a run of b, {compare.INTERVALS}\n\n" + compare.format_comparison(rows) + "\n"
     )
     print(text, end="")
     if args.out:

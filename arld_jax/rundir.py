@@ -1,18 +1,24 @@
 """The run-directory and checkpoint format: what `arld_jax.driver` writes and reads back.
 
 A run directory holds config.json (the run's identity, compared on resume), runs.json, metrics.npz
-(per-run arrays, rewritten after every chunk), state_layout.json (a fingerprint of the checkpointed
-state's leaves), checkpoints/ (orbax, the complete training state after each chunk), and when
-complete timing.json, summary.md/csv and figures/ (`arld_jax.results`, `arld_jax.plots`, which read
-it back as a typed `results.RunDir`). A group of runs (one per agent family) has group.json and one
-such directory per member.
+(per-run arrays `[num_runs, num_periods, ...]`, rewritten after every chunk), state_layout.json (a
+fingerprint of the checkpointed state's leaves), checkpoints/ (orbax, the complete training state
+after each chunk), and when complete timing.json, summary.md/csv, comparison.md/csv and figures/
+(`arld_jax.summary`, `arld_jax.compare`, `arld_jax.plots`). A group of runs (one per agent family)
+has group.json and one such directory per member. Every file name is written here once.
+
+`load_run` is the one reader: a typed `RunDir`. A sweep that is still running leaves a *partial*
+directory whose metrics hold fewer periods than `total_env_steps // eval_every`; everything that
+reads it then summarises the periods present and says so.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +33,16 @@ GROUP_FILE = "group.json"
 """In the output directory of a `SweepGroup`: its members' subdirectory names and the command."""
 CONFIG_FILE = "config.json"
 """The run's identity: resolved config, swept fields, seeds (compared on resume), command, expert."""
+RUNS_FILE = "runs.json"
+"""One record per run, in run order: run, cell, cell_label, seed and every sweepable field."""
+TIMING_FILE = "timing.json"
+"""Written when a sweep completes: wall, train and compile seconds, env steps per second."""
+SUMMARY_CSV, SUMMARY_MD = "summary.csv", "summary.md"
+"""The summary table of a run directory (or of a group's members together)."""
+COMPARISON_CSV, COMPARISON_MD = "comparison.csv", "comparison.md"
+"""The pairwise comparisons of the paper's strategies."""
+FIGURES_DIR = "figures"
+"""The paper's figures, redrawn by `python -m arld_jax.run plot DIR`."""
 _FIELDS = {f.name: f for f in dataclasses.fields(Config) if f.name != "notes"}
 
 
@@ -154,3 +170,243 @@ def state_samples(state, num_runs: int) -> dict[str, np.ndarray]:  # noqa: ANN00
         out[f"{name}_env_step"] = np.asarray(s.env_step)[:num_runs]
         out[f"{name}_valid"] = np.asarray(s.key)[:num_runs] >= 0
     return out
+
+
+# ---------------------------------------------------------------- reading a run directory back
+
+
+REQUIRED_FILES: tuple[str, ...] = (CONFIG_FILE, RUNS_FILE, METRICS_FILE)
+"""Files a run directory must have before it can be summarised or plotted."""
+
+
+@dataclasses.dataclass(frozen=True)
+class RunDir:
+    """A run directory as read by `load_run` (the one reader of what `arld_jax.run` writes)."""
+
+    path: Path
+    config: dict[str, Any]  # the whole config.json: config, sweep, seeds, preset, command, expert
+    runs: list[dict[str, Any]]  # runs.json, one dict per run present in metrics.npz
+    metrics: dict[str, np.ndarray]  # metrics.npz, arrays [runs, periods, ...]
+    timing: dict[str, Any]  # timing.json, or {} if absent (a sweep still running)
+    periods: int  # evaluation periods present
+    expected_periods: int  # total_env_steps // eval_every
+    partial: bool  # fewer periods or runs present than the sweep will write
+    missing_runs: int  # runs listed in runs.json but not yet in metrics.npz (normally 0)
+    sources: tuple[Path, ...] = ()  # the directories `pool_runs` read into this one, else ()
+
+    @property
+    def cfg(self) -> dict[str, Any]:
+        """The run's Config fields (config.json's "config")."""
+        return self.config.get("config", {})
+
+    @property
+    def agent(self) -> str:
+        """The run's agent family (directories written before there was a choice trained SAC)."""
+        return self.cfg.get("agent", "sac")
+
+    @property
+    def name(self) -> str:
+        """The directory's name; pooled directories' names joined with "+"."""
+        return "+".join(p.name for p in self.sources) or self.path.name
+
+    @property
+    def where(self) -> str:
+        """The directory's path, for messages; pooled directories' paths joined with " + "."""
+        return " + ".join(str(p) for p in self.sources) or str(self.path)
+
+
+@dataclasses.dataclass(frozen=True)
+class Cell:
+    """Runs of one cell: same swept values, different seeds."""
+
+    cell: Any  # the cell id of runs.json
+    cell_label: str
+    runs: list[int]  # run indices
+    seeds: list[Any]
+    fields: dict[str, Any]  # runs.json entry of its first run
+
+
+def load_run(run_dir: str | Path) -> RunDir:
+    """Load a run directory.
+
+    Returns a `RunDir` (its fields say what each file holds).
+
+    Raises:
+        FileNotFoundError: the directory or one of config.json, runs.json, metrics.npz is missing.
+        ValueError: the files are unreadable or inconsistent.
+    """
+    path = Path(run_dir)
+    if not path.is_dir():
+        raise FileNotFoundError(f"run directory {path} does not exist")
+    missing = [name for name in REQUIRED_FILES if not (path / name).is_file()]
+    if missing:
+        raise FileNotFoundError(
+            f"run directory {path} has no {' or '.join(missing)} (a run directory needs "
+            f"{', '.join(REQUIRED_FILES)}). If a sweep is writing it, the sweep may not have "
+            "finished its first chunk yet: metrics.npz appears after the first chunk of training."
+        )
+    config = json.loads((path / CONFIG_FILE).read_text())
+    runs = json.loads((path / RUNS_FILE).read_text())
+    try:
+        with np.load(path / METRICS_FILE, allow_pickle=False) as npz:
+            metrics = {key: np.asarray(npz[key]) for key in npz.files}
+    except (OSError, ValueError, EOFError) as err:
+        raise ValueError(
+            f"cannot read {path / 'metrics.npz'} ({err}); the sweep may be writing it right now, "
+            "try again in a moment"
+        ) from err
+    timing_path = path / TIMING_FILE
+    timing = json.loads(timing_path.read_text()) if timing_path.is_file() else {}
+
+    if "eval_return" not in metrics:
+        raise ValueError(f"{path / 'metrics.npz'} has no eval_return (has {sorted(metrics)})")
+    num_runs, periods = metrics["eval_return"].shape[:2]
+    if num_runs > len(runs):
+        raise ValueError(
+            f"{path}: metrics.npz has {num_runs} runs but runs.json lists only {len(runs)}"
+        )
+    missing_runs = len(runs) - num_runs
+    runs = runs[:num_runs]
+    cfg = config.get("config", {})
+    eval_every = int(cfg.get("eval_every") or 0)
+    total = int(cfg.get("total_env_steps") or 0)
+    expected = total // eval_every if eval_every > 0 else periods
+    return RunDir(
+        path=path,
+        config=config,
+        runs=runs,
+        metrics=metrics,
+        timing=timing,
+        periods=int(periods),
+        expected_periods=int(expected),
+        partial=bool(periods < expected or missing_runs > 0),
+        missing_runs=int(missing_runs),
+    )
+
+
+POOL_MAY_DIFFER: tuple[str, ...] = ("seed", "total_env_steps")
+"""Config fields in which directories pooled by `pool_runs` may differ (the run length: pooling
+keeps the evaluations all of them have)."""
+
+
+def pool_runs(run_dirs: Sequence[str | Path | RunDir]) -> RunDir:
+    """Run directories of one experiment run with different seeds (seeds 0-4, later 5-9 with the
+    same command and another --out), read as one: their runs side by side, in the order given,
+    over the evaluations all of them have. Only ``eval_return`` and ``env_steps`` are pooled (what
+    `compare_runs` reads); one directory is returned as loaded.
+
+    Raises ValueError naming the directories and the difference when their configs differ in a
+    field other than `POOL_MAY_DIFFER`, when their sweeps or experts differ, or when a cell has the
+    same seed in two of them (its runs would be counted twice)."""
+    runs = [as_run(d) for d in run_dirs]
+    if not runs:
+        raise ValueError("pool_runs needs at least one run directory")
+    if len(runs) == 1:
+        return runs[0]
+    first = runs[0]
+    for other in runs[1:]:
+        fields = sorted(set(first.cfg) | set(other.cfg))
+        differ = [f for f in fields if f not in POOL_MAY_DIFFER
+                  and first.cfg.get(f) != other.cfg.get(f)]  # fmt: skip
+        for what in ("sweep", "expert"):
+            a, b = first.config.get(what), other.config.get(what)
+            if what == "sweep":
+                a, b = [{k: v for k, v in (x or {}).items() if k != "seed"} for x in (a, b)]
+            if a != b:
+                differ.append(what)
+        if differ:
+            shown = ", ".join(
+                f"{f} {first.cfg.get(f, first.config.get(f))!r} against "
+                f"{other.cfg.get(f, other.config.get(f))!r}"
+                for f in differ
+            )
+            raise ValueError(
+                f"cannot pool {first.path} and {other.path}: they differ in {shown} (pooled "
+                f"directories may differ only in {', '.join(POOL_MAY_DIFFER)})"
+            )
+    seen: dict[tuple[str, Any], Path] = {}
+    for run in runs:
+        for entry in run.runs:
+            key = (str(entry.get("cell_label", "")), entry.get("seed"))
+            if key in seen:
+                raise ValueError(
+                    f"cannot pool: seed {key[1]} of cell {key[0] or 'base'!r} is in both "
+                    f"{seen[key]} and {run.path}; pool directories run with different --seeds"
+                )
+            seen[key] = run.path
+    periods = min(run.periods for run in runs)
+    eval_return = np.concatenate([r.metrics["eval_return"][:, :periods] for r in runs])
+    steps = env_steps_axis(first)[:periods]
+    entries = [dict(e, run=i) for i, e in enumerate(e for r in runs for e in r.runs)]
+    seeds = [s for r in runs for s in r.config.get("seeds", [])]
+    return RunDir(
+        path=first.path,
+        config=dict(first.config, seeds=seeds),
+        runs=entries,
+        metrics=dict(eval_return=eval_return, env_steps=np.tile(steps, (len(eval_return), 1))),
+        timing={},
+        periods=periods,
+        expected_periods=max(r.expected_periods for r in runs),
+        partial=any(r.partial or r.periods > periods for r in runs),
+        missing_runs=sum(r.missing_runs for r in runs),
+        sources=tuple(r.path for r in runs),
+    )
+
+
+def as_run(run: RunDir | str | Path) -> RunDir:
+    """Accept a loaded run directory or a path."""
+    return run if isinstance(run, RunDir) else load_run(run)
+
+
+def run_field(run: RunDir, index: int, name: str, default: Any = None) -> Any:
+    """Field ``name`` of run ``index``: from runs.json, else from the config, else ``default``."""
+    entry = run.runs[index]
+    if name in entry:
+        return entry[name]
+    return run.cfg.get(name, default)
+
+
+def swept_fields(run: RunDir) -> list[str]:
+    """The swept fields that tell cells apart (the config's sweep keys, without seed)."""
+    return [name for name in run.config.get("sweep") or {} if name != "seed"]
+
+
+def env_steps_axis(run: RunDir) -> np.ndarray:
+    """[P] env steps of the evaluations present (metrics env_steps is [R, P] or [P])."""
+    metrics = run.metrics
+    if "env_steps" in metrics:
+        steps = np.asarray(metrics["env_steps"])
+        return steps[0] if steps.ndim == 2 else steps
+    eval_every = int(run.cfg.get("eval_every", 1))
+    return (np.arange(run.periods) + 1) * eval_every
+
+
+def group_cells(run: RunDir) -> list[Cell]:
+    """The cells of a run directory in cell order; runs of one cell differ only in seed."""
+    cells: dict[Any, Cell] = {}
+    for index, entry in enumerate(run.runs):
+        key = entry.get("cell", entry.get("cell_label", 0))
+        if key not in cells:
+            cells[key] = Cell(key, str(entry.get("cell_label", "")), [], [], dict(entry))
+        cells[key].runs.append(index)
+        cells[key].seeds.append(entry.get("seed", run_field(run, index, "seed")))
+    out = list(cells.values())
+    if all(isinstance(c.cell, int) for c in out):
+        out.sort(key=lambda c: c.cell)
+    return out
+
+
+def expert_return(run: RunDir) -> float:
+    """The expert's evaluation return from config.json, or nan when there is no expert."""
+    expert = run.config.get("expert") or {}
+    value = expert.get("eval_return") if isinstance(expert, dict) else None
+    return float(value) if value is not None else math.nan
+
+
+def group_members(group_dir: str | Path) -> list[Path]:
+    """The member run directories of a `SweepGroup` output directory (its group.json), in order."""
+    group_dir = Path(group_dir)
+    path = group_dir / GROUP_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"{group_dir} is not a group of runs (no group.json)")
+    return [group_dir / name for name in json.loads(path.read_text())["members"]]

@@ -9,9 +9,9 @@ anything compiles, naming the field.
 Pruning (on by default): a swept value that cannot change a strategy's runs is not swept for it.
 b (`query_prob`) only acts in Bernoulli cells, t_query only in active cells, and C, the budget and
 eps_d only where an expert is asked at all (`RELEVANT_FOR`). So `--strategy none,bernoulli,active
---query_prob 0.1,0.3 --t_query 0.1,0.2` trains 1 + 2 + 2 cells (per uncertainty), not 12 duplicates:
-the paper's grid shrinks from 16,000 runs to 1,420. A pruned cell keeps the base value of the
-fields it ignores and its label omits them. `--full_grid` turns pruning off.
+--query_prob 0.1,0.3 --t_query 0.1,0.2` trains 1 + 2 + 2 cells (per uncertainty), not 12 duplicates
+(the `paper` preset's grid: `preset_paper`). A pruned cell keeps the base value of the fields it
+ignores and its label omits them. `--full_grid` turns pruning off.
 """
 
 from __future__ import annotations
@@ -210,7 +210,7 @@ def _arld_cells(**extra: tuple[Any, ...]) -> dict[str, tuple[Any, ...]]:
 
 
 def _cpu_arld_config() -> Config:
-    """The CPU-sized ARLD protocol of the `experiment` preset (experiments/arld_cpu, sessions 1-4).
+    """The CPU-sized ARLD protocol of the `experiment` preset (experiments/arld_cpu).
 
     A scaled-down paper protocol: MJX HalfCheetah, paper networks (2x256), batch 256, alpha 0.2,
     prioritized replay with demo bonus; 2 envs per run with one update per iteration (0.5 updates
@@ -229,8 +229,6 @@ def _cpu_arld_config() -> Config:
         num_eval_episodes=1,
         budget=1_500,
         window_size=1_000,
-        query_prob=0.1,
-        t_query=0.1,
         demo_steps=5,
         expert_path=SHIPPED_EXPERT_PATH,
     )
@@ -238,7 +236,7 @@ def _cpu_arld_config() -> Config:
 
 def _default_config() -> Config:
     """The default sweep's protocol: the `arld` protocol (1 env, one update per env step, SAC's
-    defaults) cut to what a 2-core CPU runs in about ten minutes for 12 runs.
+    defaults) cut to what a 2-core CPU runs in minutes for 12 runs.
 
     20k env steps per run (plain SAC at reward scale 5 is past its warm-up and starts to run
     upright by then, see experiments/sac_ablation); a 2k-step random warm-up instead of 5k; one
@@ -258,16 +256,14 @@ def _default_config() -> Config:
         window_size=1_000,
         query_prob=0.2,
         t_query=0.2,
-        demo_steps=1,
         expert_path=SHIPPED_EXPERT_PATH,
     )
 
 
 def preset_default() -> Sweep:
-    """The main job, about ten minutes on a 2-core CPU: SAC, GQSAC, BQSAC and AQSAC (intrinsic
-    sigma_theta), 3 seeds each, 20k env steps of MJX HalfCheetah at 1 env per run, budget 4,000
-    demonstrated steps from the shipped expert (12 runs in one compiled program; 11 min on a quiet
-    2-core CPU).
+    """The main job: SAC, GQSAC, BQSAC and AQSAC (intrinsic sigma_theta), 3 seeds each, 20k env
+    steps of MJX HalfCheetah at 1 env per run, budget 4,000 demonstrated steps from the shipped
+    expert (12 runs in one compiled program; its wall time is in experiments/README.md).
 
     What to expect: plain SAC is still early on its learning curve at 20k steps (around 0-250);
     Bernoulli and active querying end higher on average (about 600-1,000 in the committed run),
@@ -285,7 +281,7 @@ def preset_experiment() -> Sweep:
 
 
 def preset_sac() -> Sweep:
-    """Plain SAC on MJX HalfCheetah, 3 seeds, 100k env steps (issue: SAC learns on CPU)."""
+    """Plain SAC on MJX HalfCheetah, 3 seeds, 100k env steps: the SAC learning curve on CPU."""
     return Sweep(cfg=config_presets.halfcheetah(), seeds=(0, 1, 2))
 
 
@@ -305,7 +301,7 @@ def preset_paper() -> Sweep:
 
 
 def _arld_100k_config() -> Config:
-    """The protocol of the paper's comparison at a length this CPU can run (learning issue, part 4).
+    """The protocol of the paper's comparison at a quarter of its length.
 
     The paper (A.1): 400k env steps, 1 env, one update per env step, budget 10,000 demonstrated
     steps, N_r = 5,000, b = 0.1 and t_query = 0.1 (its best values), C = 1 (its grid starts there),
@@ -314,18 +310,7 @@ def _arld_100k_config() -> Config:
     episodes. Plain SAC is still below the expert at 100k (4,236 against 6,431: experiments/
     expert/), so demonstrations have room to matter. b = 0.1 for both uncertainty measures (the paper's best b
     for Noisy SAC was 0.4; one b keeps BQSAC and BQNoisySAC spending alike)."""
-    return Config(
-        total_env_steps=100_000,
-        replay_capacity=100_000,
-        eval_every=5_000,
-        num_eval_episodes=5,
-        budget=2_500,
-        window_size=5_000,
-        query_prob=0.1,
-        t_query=0.1,
-        demo_steps=1,
-        expert_path=SHIPPED_EXPERT_PATH,
-    )
+    return Config(replay_capacity=100_000, budget=2_500, expert_path=SHIPPED_EXPERT_PATH)
 
 
 def preset_arld() -> Sweep:
@@ -356,13 +341,7 @@ def _arld_400k_config() -> Config:
       authors used for HalfCheetah and what our ablation chose, experiments/README.md);
     - 10 deterministic evaluation episodes per evaluation (A.1 does not say how many; `paper()`'s
       value), and a 5,000-step uniform-random warm-up (A.1 is silent; our default)."""
-    return config_presets.paper(
-        backend="mujoco",
-        query_prob=0.1,
-        t_query=0.1,
-        demo_steps=1,
-        expert_path=SHIPPED_EXPERT_PATH,
-    )
+    return config_presets.paper(backend="mujoco", expert_path=SHIPPED_EXPERT_PATH)
 
 
 def preset_arld_400k() -> Sweep:

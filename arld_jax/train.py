@@ -41,7 +41,7 @@ def only_if(pred: jax.Array, fn: Callable[[Any], Any], carry: Any) -> Any:
     Used instead of `lax.cond(pred, fn, lambda c: c, carry)` for the big loop-carried state
     (agent and replay): XLA carries a while loop's state in place, whereas a conditional writes
     its results to new buffers that the enclosing scan then copies back, the whole AgentState at
-    every iteration (benchmarks/README.md, "Session 5"). Keep `pred` unbatched under `vmap` (it
+    every iteration (benchmarks/README.md, "Where the trainer's 'other' time is not, and one copy per iteration"). Keep `pred` unbatched under `vmap` (it
     depends only on the iteration index), or the loop becomes a select that runs `fn` always."""
     return jax.lax.fori_loop(0, pred.astype(jnp.int32), lambda _, c: fn(c), carry)
 

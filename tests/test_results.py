@@ -17,9 +17,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from matplotlib.image import imread
-from scipy import stats
+from scipy import stats as scipy_stats
 
-from arld_jax import plots, results
+from arld_jax import compare, plots, rundir, stats, summary
 
 EVAL_EVERY = 1000
 PERIODS = 4
@@ -151,35 +151,35 @@ HALF_SD10_N3 = 24.8414
 def test_mean_ci95_hand_computed() -> None:
     # values [1, 2, 3, 4]: mean 2.5; sd (ddof=1) = sqrt((2.25 + 0.25 + 0.25 + 2.25) / 3) = 1.2910;
     # t(0.975, 3) = 3.1824; half-width = 3.1824 * 1.2910 / sqrt(4) = 2.0543
-    mean, half = results.mean_ci95(np.array([1.0, 2.0, 3.0, 4.0]))
+    mean, half = stats.mean_ci95(np.array([1.0, 2.0, 3.0, 4.0]))
     assert mean == pytest.approx(2.5)
     assert half == pytest.approx(2.0543, abs=1e-4)
     # NaNs are dropped before anything else
-    assert results.mean_ci95(np.array([1.0, np.nan, 2.0, 3.0, 4.0])) == (mean, half)
-    one_mean, one_half = results.mean_ci95(np.array([5.0]))
+    assert stats.mean_ci95(np.array([1.0, np.nan, 2.0, 3.0, 4.0])) == (mean, half)
+    one_mean, one_half = stats.mean_ci95(np.array([5.0]))
     assert one_mean == 5.0 and math.isnan(one_half)
-    assert all(math.isnan(v) for v in results.mean_ci95(np.array([np.nan])))
+    assert all(math.isnan(v) for v in stats.mean_ci95(np.array([np.nan])))
 
 
 @settings(max_examples=40, deadline=None)
 @given(st.lists(st.floats(-1e4, 1e4), min_size=2, max_size=12))
 def test_mean_ci95_matches_scipy_interval(values: list[float]) -> None:
     x = np.array(values)
-    mean, half = results.mean_ci95(x)
-    sem = stats.sem(x)
+    mean, half = stats.mean_ci95(x)
+    sem = scipy_stats.sem(x)
     if sem == 0:
         assert half == pytest.approx(0.0, abs=1e-9)
         return
-    lo, hi = stats.t.interval(0.95, x.size - 1, loc=x.mean(), scale=sem)
+    lo, hi = scipy_stats.t.interval(0.95, x.size - 1, loc=x.mean(), scale=sem)
     assert mean == pytest.approx(x.mean(), abs=1e-9)
     assert half == pytest.approx((hi - lo) / 2, rel=1e-6, abs=1e-9)
 
 
 def test_mean_ci95_columns_matches_scalar() -> None:
     values = np.array([[1.0, 5.0, np.nan], [2.0, 5.0, 7.0], [3.0, np.nan, np.nan], [4.0, 8.0, 1.0]])
-    mean, half = results.mean_ci95_columns(values)
+    mean, half = stats.mean_ci95_columns(values)
     for col in range(values.shape[1]):
-        m, h = results.mean_ci95(values[:, col])
+        m, h = stats.mean_ci95(values[:, col])
         assert mean[col] == pytest.approx(m)
         assert half[col] == pytest.approx(h)
     assert half[0] == pytest.approx(2.0543, abs=1e-4)  # the [1, 2, 3, 4] example again
@@ -187,14 +187,14 @@ def test_mean_ci95_columns_matches_scalar() -> None:
 
 def test_area_under_curve_is_mean_of_evaluations() -> None:
     ret = np.array([[1.0, 2.0, 3.0, 6.0], [0.0, 0.0, 0.0, 4.0]])
-    auc = results.area_under_curve(ret, np.array([1000, 2000, 3000, 4000]))
+    auc = stats.area_under_curve(ret, np.array([1000, 2000, 3000, 4000]))
     np.testing.assert_allclose(auc, [3.0, 1.0])  # (1 + 2 + 3 + 6) / 4, 4 / 4
     with pytest.raises(ValueError, match="evaluation points"):
-        results.area_under_curve(ret, np.array([1000, 2000]))
+        stats.area_under_curve(ret, np.array([1000, 2000]))
 
 
 def test_summarize_hand_computed(run_dir: Path) -> None:
-    rows = results.summarize(run_dir)
+    rows = summary.summarize(run_dir)
     assert [r["cell"] for r in rows] == [0, 1]
     assert [r["strategy"] for r in rows] == ["none", "bernoulli"]
     assert rows[1]["cell_label"] == "strategy=bernoulli"
@@ -219,7 +219,7 @@ def test_summarize_hand_computed(run_dir: Path) -> None:
 
 
 def test_write_summary_csv_schema_and_markdown(run_dir: Path) -> None:
-    csv_path, md_path = results.write_summary(run_dir)
+    csv_path, md_path = summary.write_summary(run_dir)
     assert csv_path == run_dir / "summary.csv" and md_path == run_dir / "summary.md"
     with csv_path.open() as handle:
         reader = csv.DictReader(handle)
@@ -268,9 +268,9 @@ def test_partial_run_is_summarised_over_periods_present(tmp_path: Path) -> None:
         total_periods=4,
         expert=None,
     )
-    run = results.load_run(run_dir)
+    run = rundir.load_run(run_dir)
     assert run.partial and run.periods == 2 and run.expected_periods == 4
-    sac, bq = results.summarize(run_dir)
+    sac, bq = summary.summarize(run_dir)
     # final = period 1: 200 (c + 1) + 10 s; AUC = mean(100, 200) (c + 1) + 10 s
     assert sac["final_return_mean"] == pytest.approx(210.0)
     assert bq["final_return_mean"] == pytest.approx(410.0)
@@ -281,7 +281,7 @@ def test_partial_run_is_summarised_over_periods_present(tmp_path: Path) -> None:
     assert bq["demos_used_ci95"] == pytest.approx(49.683, abs=1e-3)
     assert bq["periods"] == 2 and bq["env_steps"] == 2000
     assert math.isnan(bq["expert_return"])
-    _, md_path = results.write_summary(run_dir)
+    _, md_path = summary.write_summary(run_dir)
     md = md_path.read_text()
     assert "Partial run directory" in md and "2 of 4 evaluation periods" in md
     assert "2,000 of 4,000 env steps" in md
@@ -289,22 +289,22 @@ def test_partial_run_is_summarised_over_periods_present(tmp_path: Path) -> None:
 
 def test_missing_files_raise_helpful_errors(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match="does not exist"):
-        results.load_run(tmp_path / "nowhere")
+        rundir.load_run(tmp_path / "nowhere")
     empty = tmp_path / "empty"
     empty.mkdir()
     with pytest.raises(FileNotFoundError, match="config.json") as info:
-        results.summarize(empty)
+        summary.summarize(empty)
     assert "first chunk" in str(info.value)
     run_dir = write_run_dir(tmp_path / "started", NONE_AND_BERNOULLI, {"strategy": ["none"]})
     (run_dir / "metrics.npz").unlink()
     with pytest.raises(FileNotFoundError, match=r"no metrics\.npz.*first chunk"):
-        results.write_summary(run_dir)
+        summary.write_summary(run_dir)
     with pytest.raises(FileNotFoundError, match="metrics.npz"):
         plots.plot_all(run_dir)
 
 
 def test_uncertainty_is_cut_at_budget_depletion(run_dir: Path) -> None:
-    run = results.load_run(run_dir)
+    run = rundir.load_run(run_dir)
     x = plots.trace_env_steps(run)
     # period p, slice j -> (p + (j + 1) / 5) * 1000: 200, 400, ..., 4000
     np.testing.assert_allclose(x[:3], [200.0, 400.0, 600.0])
@@ -361,7 +361,7 @@ def test_plot_all_without_queries_draws_whole_run_uncertainty(tmp_path: Path) ->
     run_dir = write_run_dir(
         tmp_path / "sac", [{"strategy": "none"}], {}, periods=PERIODS, expert=None
     )
-    run = results.load_run(run_dir)
+    run = rundir.load_run(run_dir)
     fig = plots.fig3_uncertainty(run)
     assert fig is not None and "whole run" in fig.get_suptitle()
     drawn = [name for name, make in plots.FIGURES.items() if make(run) is not None]
@@ -382,24 +382,24 @@ def test_upside_down_late_from_period_metric(tmp_path: Path) -> None:
     n = m["eval_return"].shape[0]
     m["upside_down"] = np.arange(10)[None, :] / 10 + np.arange(n)[:, None] / 100
     np.savez(path / "metrics.npz", **m)
-    late, source = results.upside_down_late(results.load_run(path))
+    late, source = summary.upside_down_late(rundir.load_run(path))
     assert source == "periods"
     np.testing.assert_allclose(late, 0.8 + np.arange(n) / 100)
-    rows = results.summarize(path)
+    rows = summary.summarize(path)
     np.testing.assert_allclose(rows[1]["upside_down_late_mean"], 0.8 + 0.04)  # runs 3, 4, 5
-    assert plots.fig_gait(results.load_run(path)) is None  # toy env: no gait figure
+    assert plots.fig_gait(rundir.load_run(path)) is None  # toy env: no gait figure
     cfg = json.loads((path / "config.json").read_text())
     cfg["config"]["env_name"] = "halfcheetah"
     (path / "config.json").write_text(json.dumps(cfg))
     assert (path / "figures" / "gait.png") in plots.plot_all(path)
-    assert "upside down (last 30%)" in (results.write_summary(path)[1]).read_text()
+    assert "upside down (last 30%)" in (summary.write_summary(path)[1]).read_text()
 
 
 def test_upside_down_late_from_visited_sample_for_old_halfcheetah_runs(tmp_path: Path) -> None:
     """Without the per-period metric, a HalfCheetah run is judged on its saved sample of visited
     states seen in the last 30% of the env steps; a toy run has no gait (n/a)."""
     path = write_run_dir(tmp_path / "h", NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]})
-    late, source = results.upside_down_late(results.load_run(path))
+    late, source = summary.upside_down_late(rundir.load_run(path))
     assert source == "n/a" and np.all(np.isnan(late))  # toy env
     cfg = json.loads((path / "config.json").read_text())
     cfg["config"]["env_name"] = "halfcheetah"
@@ -414,7 +414,7 @@ def test_upside_down_late_from_visited_sample_for_old_halfcheetah_runs(tmp_path:
     obs[0, :, 1] = np.where(late_mask[0], np.pi, 0.0)  # run 0: every late state flipped
     m.update(visited_obs=obs, visited_env_step=steps, visited_valid=np.ones((n, k), bool))
     np.savez(path / "metrics.npz", **m)
-    late, source = results.upside_down_late(results.load_run(path))
+    late, source = summary.upside_down_late(rundir.load_run(path))
     assert source == "sample"
     expected = [np.mean(np.arange(k)[late_mask[r]] % 2 == 0) for r in range(n)]
     expected[0] = 1.0
@@ -432,7 +432,7 @@ def test_probability_of_improvement_equals_rliables(xs: list[int], ys: list[int]
 
     x, y = np.asarray(xs, float), np.asarray(ys, float)
     want = rly_metrics.probability_of_improvement(x[:, None], y[:, None])
-    assert results.probability_of_improvement(x, y) == pytest.approx(float(want))
+    assert stats.probability_of_improvement(x, y) == pytest.approx(float(want))
 
 
 def test_pairwise_comparison_with_bootstrap_cis(tmp_path: Path) -> None:
@@ -441,10 +441,10 @@ def test_pairwise_comparison_with_bootstrap_cis(tmp_path: Path) -> None:
     mean (same seed offsets), and every AQSAC run beats every BQSAC run: P = 1 with CI [1, 1]."""
     cells = [{"strategy": "none"}, {"strategy": "bernoulli"}, {"strategy": "active"}]
     path = write_run_dir(tmp_path / "c", cells, {"strategy": ["none", "bernoulli", "active"]})
-    run = results.load_run(path)
-    names = [name for name, _, _ in results.comparison_pairs(run)]
+    run = rundir.load_run(path)
+    names = [name for name, _, _ in compare.comparison_pairs(run)]
     assert names == ["AQSAC - BQSAC", "AQSAC - SAC"]  # one uncertainty: no intrinsic-extrinsic
-    rows = {(r["pair"], r["metric"]): r for r in results.compare(run, reps=2_000)}
+    rows = {(r["pair"], r["metric"]): r for r in compare.compare(run, reps=2_000)}
     final = rows[("AQSAC - BQSAC", "final return")]
     assert final["diff"] == pytest.approx(400.0)
     # Resampling the 3 seeds of each cell independently: the mean offsets range over [0, 20].
@@ -452,11 +452,11 @@ def test_pairwise_comparison_with_bootstrap_cis(tmp_path: Path) -> None:
     assert final["p_improve"] == 1.0 and final["p_lo"] == 1.0 and final["p_hi"] == 1.0
     auc = rows[("AQSAC - SAC", "AUC")]
     assert auc["diff"] == pytest.approx(2 * 250.0)  # AUC = 100 (cell + 1) * 2.5 + 10 seed
-    md = results.write_comparison(path).read_text()
+    md = compare.write_comparison(path).read_text()
     assert "| AQSAC - BQSAC | final return | 3 / 3 | 400 [" in md
     # A run without pairs (no active cell) writes nothing.
     other = write_run_dir(tmp_path / "n", NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]})
-    assert results.write_comparison(other) is None
+    assert compare.write_comparison(other) is None
 
 
 def test_bootstrap_difference_is_reproducible_and_leaves_global_rng_alone() -> None:
@@ -467,10 +467,10 @@ def test_bootstrap_difference_is_reproducible_and_leaves_global_rng_alone() -> N
     np.random.seed(123)
     want_next = np.random.random_sample()
     np.random.seed(123)
-    a = results.bootstrap_difference(x, y, reps=500, seed=0)
+    a = stats.bootstrap_difference(x, y, reps=500, seed=0)
     assert np.random.random_sample() == want_next
-    b = results.bootstrap_difference(x, y, reps=500, seed=0)
-    c = results.bootstrap_difference(x, y, reps=500, seed=1)
+    b = stats.bootstrap_difference(x, y, reps=500, seed=0)
+    c = stats.bootstrap_difference(x, y, reps=500, seed=1)
     assert (a["diff_lo"], a["diff_hi"]) == (b["diff_lo"], b["diff_hi"])
     assert (a["diff_lo"], a["diff_hi"], a["p_lo"]) != (c["diff_lo"], c["diff_hi"], c["p_lo"])
 
@@ -480,28 +480,28 @@ def test_welch_interval_matches_scipy_and_a_hand_computation() -> None:
     mean(x) - mean(y) = 2 - 1 = 1, se^2 = 2/2 + 3/3 = 2, df = 2^2 / (1^2/1 + 1^2/2) = 8/3. One
     value on a side has no interval; constant samples give the point."""
     x, y = np.array([1.0, 3.0]), np.array([0.0, 0.0, 3.0])
-    lo, hi = results.welch_ci95(x, y)
-    half = stats.t.ppf(0.975, 8 / 3) * math.sqrt(2.0)
+    lo, hi = stats.welch_ci95(x, y)
+    half = scipy_stats.t.ppf(0.975, 8 / 3) * math.sqrt(2.0)
     assert (lo, hi) == pytest.approx((1.0 - half, 1.0 + half), rel=1e-12)
     rng = np.random.default_rng(3)
     for n, m in ((5, 5), (5, 10), (3, 7)):
         a, b = rng.normal(2.0, 1.0, n), rng.normal(0.0, 3.0, m)
-        want = stats.ttest_ind(a, b, equal_var=False).confidence_interval(0.95)
-        assert results.welch_ci95(a, b) == pytest.approx((want.low, want.high), rel=1e-10)
-    assert all(math.isnan(v) for v in results.welch_ci95(np.array([1.0]), y))
-    assert results.welch_ci95(np.full(3, 2.0), np.full(4, 5.0)) == (-3.0, -3.0)
+        want = scipy_stats.ttest_ind(a, b, equal_var=False).confidence_interval(0.95)
+        assert stats.welch_ci95(a, b) == pytest.approx((want.low, want.high), rel=1e-10)
+    assert all(math.isnan(v) for v in stats.welch_ci95(np.array([1.0]), y))
+    assert stats.welch_ci95(np.full(3, 2.0), np.full(4, 5.0)) == (-3.0, -3.0)
 
 
 def test_bootstrap_rows_carry_the_welch_interval_and_the_table_shows_it() -> None:
     """`bootstrap_difference` rows hold `welch_ci95` of the same samples, and `format_comparison`
     prints it in its own column beside the bootstrap interval."""
     x, y = np.array([1.0, 5, 3, 8, 2]), np.array([0.0, 4, 1, 2, 6])
-    row = results.bootstrap_difference(x, y, reps=500, seed=0)
-    assert (row["welch_lo"], row["welch_hi"]) == results.welch_ci95(x, y)
+    row = stats.bootstrap_difference(x, y, reps=500, seed=0)
+    assert (row["welch_lo"], row["welch_hi"]) == stats.welch_ci95(x, y)
     # With 5 values a side the bootstrap interval is the narrower one (interval_coverage.md).
     assert row["welch_hi"] - row["welch_lo"] > row["diff_hi"] - row["diff_lo"]
-    table = results.format_comparison([dict(row, pair="a − b", metric="final return")])
-    lo, hi = results.welch_ci95(x, y)
+    table = compare.format_comparison([dict(row, pair="a − b", metric="final return")])
+    lo, hi = stats.welch_ci95(x, y)
     assert f"| [{lo:,.0f}, {hi:,.0f}] |" in table and "Welch t 95% CI" in table
 
 
@@ -513,16 +513,16 @@ def test_pooled_directories_compare_as_one_with_every_seed(tmp_path: Path) -> No
     first = write_run_dir(tmp_path / "s0-2", cells, sweep)
     second = write_run_dir(tmp_path / "s3-5", cells, sweep, periods=3, seeds=(3, 4, 5))
     other = write_run_dir(tmp_path / "other", cells, sweep)
-    pooled = results.pool_runs([first, second])
+    pooled = rundir.pool_runs([first, second])
     assert pooled.name == "s0-2+s3-5" and pooled.periods == 3 and pooled.partial
-    assert [c.seeds for c in results.group_cells(pooled)] == [[0, 1, 2, 3, 4, 5]] * 2
-    rows = results.compare_runs(pooled, other, reps=500)
+    assert [c.seeds for c in rundir.group_cells(pooled)] == [[0, 1, 2, 3, 4, 5]] * 2
+    rows = compare.compare_runs(pooled, other, reps=500)
     final = next(r for r in rows if r["metric"] == "final return" and "bernoulli" in r["pair"])
     # at the 3rd evaluation: cell 1 gives 600 + 10 seed; mean seed 2.5 pooled against 1 in other
     assert final["diff"] == pytest.approx(10 * 2.5 - 10 * 1.0)
     assert (final["n_a"], final["n_b"], final["env_steps"]) == (6, 3, 3 * EVAL_EVERY)
     assert final["pair"] == "s0-2+s3-5:strategy=bernoulli − other:strategy=bernoulli"
-    alone = results.pool_runs([first])  # one directory: as loaded
+    alone = rundir.pool_runs([first])  # one directory: as loaded
     assert (alone.path, alone.sources, alone.periods, len(alone.runs)) == (first, (), 4, 6)
 
 
@@ -532,17 +532,17 @@ def test_pooling_refuses_shared_seeds_and_other_configs(tmp_path: Path) -> None:
     cells, sweep = NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]}
     first = write_run_dir(tmp_path / "a", cells, sweep)
     with pytest.raises(ValueError, match="seed 0 of cell 'strategy=none' is in both"):
-        results.pool_runs([first, write_run_dir(tmp_path / "b", cells, sweep)])
+        rundir.pool_runs([first, write_run_dir(tmp_path / "b", cells, sweep)])
     other_gamma = write_run_dir(tmp_path / "g", cells, sweep, seeds=(7,))
     config = json.loads((other_gamma / "config.json").read_text())
     config["config"]["gamma"] = 0.9
     (other_gamma / "config.json").write_text(json.dumps(config))
     with pytest.raises(ValueError, match="differ in gamma 0.99 against 0.9"):
-        results.pool_runs([first, other_gamma])
+        rundir.pool_runs([first, other_gamma])
     with pytest.raises(ValueError, match="differ in sweep"):
-        results.pool_runs([first, write_run_dir(tmp_path / "s", cells[:1], {}, seeds=(8,))])
+        rundir.pool_runs([first, write_run_dir(tmp_path / "s", cells[:1], {}, seeds=(8,))])
     longer = write_run_dir(tmp_path / "l", cells, sweep, periods=6, total_periods=6, seeds=(9,))
-    assert results.pool_runs([first, longer]).periods == PERIODS
+    assert rundir.pool_runs([first, longer]).periods == PERIODS
 
 
 def test_compare_command_pools_comma_separated_directories(tmp_path: Path, capsys) -> None:
@@ -571,11 +571,11 @@ def test_comparison_pairs_include_active_against_greedy(tmp_path: Path) -> None:
     strategies = ["none", "greedy", "bernoulli", "active"]
     path = write_run_dir(tmp_path / "g", [{"strategy": s} for s in strategies],
                          {"strategy": strategies})  # fmt: skip
-    run = results.load_run(path)
-    pairs = {name: (a, b) for name, a, b in results.comparison_pairs(run)}
+    run = rundir.load_run(path)
+    pairs = {name: (a, b) for name, a, b in compare.comparison_pairs(run)}
     assert list(pairs) == ["AQSAC - BQSAC", "AQSAC - GQSAC", "AQSAC - SAC"]
     a, b = pairs["AQSAC - GQSAC"]
-    field = lambda cell: results.run_field(run, cell.runs[0], "strategy", None)  # noqa: E731
+    field = lambda cell: rundir.run_field(run, cell.runs[0], "strategy", None)  # noqa: E731
     assert (field(a), field(b)) == ("active", "greedy")
 
 
@@ -593,8 +593,8 @@ def test_comparison_pairs_are_named_after_the_agent_family(tmp_path: Path) -> No
     cfg = json.loads((path / "config.json").read_text())
     cfg["config"]["agent"] = "td3"
     (path / "config.json").write_text(json.dumps(cfg))
-    run = results.load_run(path)
-    pairs = {name: (a, b) for name, a, b in results.comparison_pairs(run)}
+    run = rundir.load_run(path)
+    pairs = {name: (a, b) for name, a, b in compare.comparison_pairs(run)}
     assert list(pairs) == [
         "AQTD3 - BQTD3",
         "AQTD3 - TD3",
@@ -604,7 +604,7 @@ def test_comparison_pairs_are_named_after_the_agent_family(tmp_path: Path) -> No
         "BQTD3 - BQNoisyTD3",
         "TD3 - NoisyTD3",
     ]
-    field = lambda cell, name: results.run_field(run, cell.runs[0], name, None)  # noqa: E731
+    field = lambda cell, name: rundir.run_field(run, cell.runs[0], name, None)  # noqa: E731
     a, b = pairs["AQNoisyTD3 - BQNoisyTD3"]
     assert (field(a, "strategy"), field(a, "uncertainty")) == ("active", "extrinsic")
     assert (field(b, "strategy"), field(b, "uncertainty")) == ("bernoulli", "extrinsic")
@@ -618,7 +618,7 @@ def test_plain_reading_names_which_cells_differ(tmp_path: Path) -> None:
     lie above plain SAC's; with the seeds' spread made huge for AQSAC, it overlaps SAC instead."""
     cells = [{"strategy": "none"}, {"strategy": "bernoulli"}, {"strategy": "active"}]
     path = write_run_dir(tmp_path / "r", cells, {"strategy": ["none", "bernoulli", "active"]})
-    text = results.plain_reading(path)
+    text = compare.plain_reading(path)
     assert "strategy=bernoulli: 810 [785, 835]: above plain SAC, intervals apart" in text
     assert "strategy=active: 1,210 [1,185, 1,235]: above plain SAC" in text
     assert "Best querying cell: strategy=active." in text
@@ -626,5 +626,5 @@ def test_plain_reading_names_which_cells_differ(tmp_path: Path) -> None:
     m = dict(np.load(path / "metrics.npz"))
     m["eval_return"][6:9, -1] = [0.0, 2000.0, 4000.0]  # AQSAC's seeds far apart
     np.savez(path / "metrics.npz", **m)
-    assert "strategy=active: 2,000 [" in results.plain_reading(path)
-    assert "not separated from plain SAC (intervals overlap)" in results.plain_reading(path)
+    assert "strategy=active: 2,000 [" in compare.plain_reading(path)
+    assert "not separated from plain SAC (intervals overlap)" in compare.plain_reading(path)

@@ -12,10 +12,15 @@ import jax
 import numpy as np
 import pytest
 
-from arld_jax import cli, driver, plots, results, run, rundir
+from arld_jax import cli, compare, driver, plots, run, rundir, summary
 from arld_jax.sweep import Sweep, SweepGroup, preset_tiny
 
 REPO = Path(__file__).resolve().parents[1]
+
+
+def _quiet(**options) -> driver.RunOptions:  # noqa: ANN003
+    """Run options for tests: no figures, nothing printed."""
+    return driver.RunOptions(plots=False, log=lambda *a: None, **options)
 
 
 def _sweep(**overrides: str) -> Sweep:
@@ -126,6 +131,20 @@ def test_arld_400k_preset_is_the_papers_protocol_with_figure_4s_cells():
     assert all(c.uncertainty == "intrinsic" for c in sweep.run_configs())
 
 
+def test_paper_preset_is_pruned_to_the_counts_its_docstring_gives():
+    """142 cells x 10 seeds = 1,420 runs, and 16,000 without pruning (the docstring's counts)."""
+    import inspect
+    import math
+
+    from arld_jax.sweep import preset_paper
+
+    sweep = preset_paper()
+    full = math.prod(len(values) for values in sweep.sweep.values()) * len(sweep.seeds)
+    assert (len(sweep.cells()), sweep.num_runs, full) == (142, 1_420, 16_000)
+    doc = " ".join(inspect.getdoc(preset_paper).split())
+    assert "142 cells x 10 seeds = 1,420 runs instead of the 16,000" in doc
+
+
 def test_static_field_list_is_refused():
     with pytest.raises(SystemExit, match="num_envs.*cannot be swept"):
         _sweep(num_envs="1,2")
@@ -178,18 +197,16 @@ def test_help_documents_every_field(capsys):
 def uninterrupted(tmp_path_factory):
     sweep = _sweep(strategy="none,greedy,active")
     out = tmp_path_factory.mktemp("full")
-    driver.run_sweep(sweep, out, chunk_periods=1, plots=False, log=lambda *a: None)
+    driver.run_sweep(sweep, out, _quiet(chunk_periods=1))
     return sweep, out
 
 
 def test_resume_after_a_stop_equals_uninterrupted(uninterrupted, tmp_path):
     sweep, full = uninterrupted
-    first = driver.run_sweep(
-        sweep, tmp_path, chunk_periods=1, stop_after_chunks=2, plots=False, log=lambda *a: None
-    )
+    first = driver.run_sweep(sweep, tmp_path, _quiet(chunk_periods=1, stop_after_chunks=2))
     assert not first["complete"]
     assert np.load(tmp_path / rundir.METRICS_FILE)["eval_return"].shape[1] == 2
-    second = driver.run_sweep(sweep, tmp_path, chunk_periods=1, plots=False, log=lambda *a: None)
+    second = driver.run_sweep(sweep, tmp_path, _quiet(chunk_periods=1))
     assert second["complete"]
     a, b = np.load(full / rundir.METRICS_FILE), np.load(tmp_path / rundir.METRICS_FILE)
     assert sorted(a.files) == sorted(b.files)
@@ -203,11 +220,12 @@ def test_resume_with_mujoco_c_physics_equals_uninterrupted(tmp_path):
     sweep = _sweep(env_name="halfcheetah", backend="mujoco", strategy="none", total_env_steps=600,
                    eval_every=200, learning_starts=100, episode_length=100, num_eval_episodes=1,
                    replay_capacity=600, window_size=100)  # fmt: skip
-    quiet = dict(chunk_periods=1, plots=False, log=lambda *a: None)
-    driver.run_sweep(sweep, tmp_path / "full", **quiet)
-    first = driver.run_sweep(sweep, tmp_path / "parts", stop_after_chunks=1, **quiet)
+    driver.run_sweep(sweep, tmp_path / "full", _quiet(chunk_periods=1))
+    first = driver.run_sweep(
+        sweep, tmp_path / "parts", _quiet(chunk_periods=1, stop_after_chunks=1)
+    )
     assert not first["complete"]
-    assert driver.run_sweep(sweep, tmp_path / "parts", **quiet)["complete"]
+    assert driver.run_sweep(sweep, tmp_path / "parts", _quiet(chunk_periods=1))["complete"]
     a = np.load(tmp_path / "full" / rundir.METRICS_FILE)
     b = np.load(tmp_path / "parts" / rundir.METRICS_FILE)
     assert np.all(np.isfinite(a["eval_return"]))
@@ -228,7 +246,7 @@ def test_checkpoint_of_another_state_layout_is_refused(uninterrupted, tmp_path):
     (out / rundir.LAYOUT_FILE).write_text(json.dumps(saved | {"sha256": "0" * 64}))
     metrics_before = (out / rundir.METRICS_FILE).read_bytes()
     with pytest.raises(SystemExit, match=r"another layout .* Nothing was overwritten"):
-        driver.run_sweep(sweep, out, chunk_periods=1, plots=False, log=lambda *a: None)
+        driver.run_sweep(sweep, out, _quiet(chunk_periods=1))
     assert (out / rundir.METRICS_FILE).read_bytes() == metrics_before
 
 
@@ -263,7 +281,7 @@ def test_other_config_in_same_directory_is_refused(uninterrupted):
     before = (full / "config.json").read_text()
     other = _sweep(strategy="none,greedy,active", budget="7")
     with pytest.raises(SystemExit, match=r"holds a different run \(budget: 200 -> 7\)"):
-        driver.run_sweep(other, full, chunk_periods=1, plots=False, log=lambda *a: None)
+        driver.run_sweep(other, full, _quiet(chunk_periods=1))
     assert (full / "config.json").read_text() == before
 
 
@@ -303,8 +321,8 @@ def test_compare_two_run_directories(uninterrupted, tmp_path, capsys):
     _, full = uninterrupted
     other = tmp_path / "other"
     sweep = _sweep(strategy="none,active", seeds="2,3")
-    driver.run_sweep(sweep, other, chunk_periods=4, plots=False, log=lambda *a: None)
-    rows = results.compare_runs(full, other, at_steps=[1000])
+    driver.run_sweep(sweep, other, _quiet(chunk_periods=4))
+    rows = compare.compare_runs(full, other, at_steps=[1000])
     assert {r["pair"].split(" − ")[0].split(":")[1] for r in rows} == {
         "strategy=none",
         "strategy=active",
@@ -322,11 +340,11 @@ def test_compare_two_run_directories(uninterrupted, tmp_path, capsys):
     at_1000 = next(r for r in rows if "active" in r["pair"] and r["metric"] == "return at 1,000")
     want = a["eval_return"][runs_a, 1].mean() - b["eval_return"][runs_b, 1].mean()
     assert at_1000["diff"] == pytest.approx(want, abs=1e-5)  # eval_every 500: the 2nd evaluation
-    for r in results.compare_runs(full, full):
+    for r in compare.compare_runs(full, full):
         assert (r["diff"], r["p_improve"]) == (0.0, 0.5)  # a and b resampled apart: CI spans 0
         assert r["diff_lo"] <= 0.0 <= r["diff_hi"] and r["p_lo"] <= 0.5 <= r["p_hi"]
     with pytest.raises(ValueError, match="no evaluation at 1,234 env steps"):
-        results.compare_runs(full, other, at_steps=[1234])
+        compare.compare_runs(full, other, at_steps=[1234])
     run.main(["compare", str(full), str(other), "--at", "1000", "--out", str(tmp_path / "c.md")])
     assert "return at 1,000" in capsys.readouterr().out
     assert "| a − b |" in (tmp_path / "c.md").read_text()
@@ -335,10 +353,9 @@ def test_compare_two_run_directories(uninterrupted, tmp_path, capsys):
     with pytest.raises(SystemExit, match="not a run directory"):
         run.main(["compare", str(full), str(tmp_path)])
     slower = tmp_path / "slower"
-    driver.run_sweep(_sweep(strategy="none", eval_every=1000), slower, chunk_periods=2,
-                     plots=False, log=lambda *a: None)  # fmt: skip
+    driver.run_sweep(_sweep(strategy="none", eval_every=1000), slower, _quiet(chunk_periods=2))
     with pytest.raises(ValueError, match="evaluates every 500 env steps"):
-        results.compare_runs(full, slower)
+        compare.compare_runs(full, slower)
 
 
 def test_needs_expert_for_halfcheetah_queries(tmp_path):
@@ -346,7 +363,7 @@ def test_needs_expert_for_halfcheetah_queries(tmp_path):
     cfg = base.cfg.replace(env_name="halfcheetah", expert_path=str(tmp_path / "nothing"))
     sweep = Sweep(cfg=cfg, sweep={"strategy": ("none", "active")}, seeds=(0,))
     with pytest.raises(SystemExit, match="No expert at"):
-        driver.run_sweep(sweep, tmp_path / "out", plots=False, log=lambda *a: None)
+        driver.run_sweep(sweep, tmp_path / "out", _quiet())
     assert not (tmp_path / "out").exists()  # nothing written before the check
 
 
@@ -454,7 +471,7 @@ def test_agent_list_is_a_group_of_programs_with_one_summary(tmp_path, capsys):
     out = tmp_path / "group"
     options = driver.RunOptions(plots=False, command="python -m arld_jax.run " + " ".join(argv))
     assert driver.run_group(group, out, options)
-    rows = results.summarize_group(out)
+    rows = summary.summarize_group(out)
     assert [(r["agent"], r["cell_label"]) for r in rows] == [
         ("sac", "strategy=none"),
         ("sac", "strategy=greedy"),

@@ -55,7 +55,6 @@ def human_config(**overrides: Any) -> Config:
     every 1k steps, N_r = 1k, t_query = 0.1 (the paper's best), C = 5 and a budget of 200
     demonstrated steps (40 queries: about a quarter of an hour of the person's time at 5 s a step)."""
     base: dict[str, Any] = dict(
-        num_envs=1,
         learning_starts=1_000,
         total_env_steps=8_000,
         replay_capacity=8_000,
@@ -63,7 +62,6 @@ def human_config(**overrides: Any) -> Config:
         num_eval_episodes=1,
         window_size=1_000,
         strategy="active",
-        t_query=0.1,
         demo_steps=5,
         budget=200,
     )
@@ -157,12 +155,7 @@ def run_with_person(
     result = run_sweep(
         Sweep(cfg=cfg, seeds=(cfg.seed,)),
         out,
-        options.chunk_periods,
-        options.stop_after_chunks,
-        command=options.command,
-        preset=options.preset,
-        plots=options.plots,
-        log=log,
+        dataclasses.replace(options, log=log),
         expert=make_human_expert(session),
         vmapped=False,
         hooks=hooks,

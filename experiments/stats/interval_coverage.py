@@ -1,7 +1,7 @@
 """How often do `compare`'s two 95% intervals of a difference of means exclude 0 when there is no
 difference? Two samples of n seeds are drawn from the same distribution, many times; each pair goes
-through `results.bootstrap_difference` (rliable's stratified percentile bootstrap, as `compare`
-calls it, but 2,000 resamples instead of 20,000 to keep this to minutes) and `results.welch_ci95`.
+through `stats.bootstrap_difference` (rliable's stratified percentile bootstrap, as `compare`
+calls it, but 2,000 resamples instead of 20,000 to keep this to minutes) and `stats.welch_ci95`.
 A calibrated 95% interval excludes 0 in about 5% of the pairs.
 
     python experiments/stats/interval_coverage.py > experiments/stats/interval_coverage.md
@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 
-from arld_jax import results
+from arld_jax import stats
 
 SIMS = 1000
 REPS = 2000
@@ -30,9 +30,9 @@ def main() -> None:
     print("# Do the 95% intervals of `compare` hold their level with few seeds?\n")
     print(f"Command: `python {' '.join(sys.argv)} > experiments/stats/interval_coverage.md`.\n")
     print(f"Two samples of n seeds drawn from one distribution, {SIMS:,} times per row (numpy seed "
-          f"0); each pair through `results.bootstrap_difference` (rliable's stratified percentile "
+          f"0); each pair through `stats.bootstrap_difference` (rliable's stratified percentile "
           f"bootstrap, as `compare` calls it, with {REPS:,} resamples instead of 20,000) and "
-          "`results.welch_ci95`. With no difference, a calibrated 95% interval excludes 0 in "
+          "`stats.welch_ci95`. With no difference, a calibrated 95% interval excludes 0 in "
           "about 5% of the pairs.\n")  # fmt: skip
     print("| draws | seeds per side | bootstrap CI excludes 0 | Welch t CI excludes 0 |")
     print("|---|---:|---:|---:|")
@@ -41,7 +41,7 @@ def main() -> None:
         boot = welch = 0
         for i in range(SIMS):
             x, y = DRAWS[name](rng, n), DRAWS[name](rng, n)
-            row = results.bootstrap_difference(x, y, reps=REPS, seed=i)
+            row = stats.bootstrap_difference(x, y, reps=REPS, seed=i)
             boot += not (row["diff_lo"] <= 0.0 <= row["diff_hi"])
             welch += not (row["welch_lo"] <= 0.0 <= row["welch_hi"])
         # binomial standard error of a proportion near 5-12%: about 0.7-1.0 points at 1,000 pairs

@@ -1,0 +1,308 @@
+"""The summary table of a run directory (one row per cell: final return, AUC, interquartile mean,
+gait, demonstrations, each with its 95% interval over seeds), and of a group's members together.
+
+Command line: ``python -m arld_jax.run plot RUN_DIR`` writes summary.csv, summary.md and the figures.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from arld_jax import gait
+from arld_jax.rundir import (
+    GROUP_FILE,
+    SUMMARY_CSV,
+    SUMMARY_MD,
+    RunDir,
+    as_run,
+    env_steps_axis,
+    expert_return,
+    group_cells,
+    group_members,
+    load_run,
+    run_field,
+    swept_fields,
+)
+from arld_jax.stats import area_under_curve, mean_ci95
+
+STAT_COLUMNS: tuple[str, ...] = (
+    "n_seeds",
+    "final_return_mean",
+    "final_return_ci95",
+    "auc_mean",
+    "auc_ci95",
+    "demos_used_mean",
+    "demos_used_ci95",
+    "upside_down_late_mean",
+    "upside_down_late_ci95",
+    "upside_down_source",
+    "expert_return",
+    "env_steps_per_second",
+    "periods",
+    "env_steps",
+)
+"""Columns of a summary row after ``cell``, ``cell_label`` and the swept fields."""
+
+
+def upside_down_late(run: RunDir) -> tuple[np.ndarray, str]:
+    """[R] fraction of visited training states upside down in the last 30% of the periods present
+    (`gait.LATE_FRACTION`), and where it came from: "periods" (the per-period metric
+    `upside_down`), "sample" (runs recorded before that metric existed: the saved uniform sample
+    of visited states, those seen in the last 30% of the env steps present) or "n/a" (no data, or
+    not HalfCheetah)."""
+    metrics = run.metrics
+    num_runs, periods = run.metrics["eval_return"].shape[:2]
+    nan = np.full(num_runs, np.nan)
+    if periods == 0:
+        return nan, "n/a"
+    if "upside_down" in metrics:
+        late = max(1, math.ceil(gait.LATE_FRACTION * periods))
+        return np.mean(np.asarray(metrics["upside_down"], np.float64)[:, -late:], axis=1), "periods"
+    env_name = run.cfg.get("env_name")
+    if env_name != "halfcheetah" or "visited_obs" not in metrics:
+        return nan, "n/a"
+    last = env_steps_axis(run)[-1]
+    late = (metrics["visited_valid"]) & (
+        metrics["visited_env_step"] > (1.0 - gait.LATE_FRACTION) * last
+    )
+    flipped = gait.upside_down(np.asarray(metrics["visited_obs"], np.float64))
+    counts = late.sum(axis=1)
+    out = np.where(counts > 0, (flipped & late).sum(axis=1) / np.maximum(counts, 1), np.nan)
+    return out, "sample"
+
+
+def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
+    """One row per cell, in cell order, over the evaluation periods present.
+
+    Row keys: ``cell``, ``cell_label``, the swept fields' values, then `STAT_COLUMNS`:
+    n_seeds; final_return_mean/ci95 (eval return at the last evaluation present); auc_mean/ci95
+    (`area_under_curve`); demos_used_mean/ci95 (final cumulative demonstrations); expert_return
+    (config.json, or nan); env_steps_per_second (timing.json, all runs together, or nan); periods
+    (evaluation periods present) and env_steps (env steps at the last evaluation present).
+    Means and 95% CIs are over the seeds of the cell (`mean_ci95`).
+    """
+    run = as_run(run_dir)
+    metrics = run.metrics
+    steps = env_steps_axis(run)
+    eval_return = np.asarray(metrics["eval_return"], dtype=np.float64)
+    auc = area_under_curve(eval_return, steps)
+    demos = metrics.get("demos_used")
+    flipped, flipped_source = upside_down_late(run)
+    expert = expert_return(run)
+    sps = float(run.timing.get("env_steps_per_second", math.nan))
+    periods = run.periods
+    fields = swept_fields(run)
+
+    rows = []
+    for cell in group_cells(run):
+        idx = np.asarray(cell.runs)
+        final = eval_return[idx, -1] if periods else np.full(idx.size, np.nan)
+        final_demos = (
+            np.asarray(demos, dtype=np.float64)[idx, -1]
+            if demos is not None and periods
+            else np.full(idx.size, np.nan)
+        )
+        row: dict[str, Any] = {"cell": cell.cell, "cell_label": cell.cell_label}
+        for name in fields:
+            row[name] = run_field(run, cell.runs[0], name)
+        row["n_seeds"] = int(idx.size)
+        row["final_return_mean"], row["final_return_ci95"] = mean_ci95(final)
+        row["auc_mean"], row["auc_ci95"] = mean_ci95(auc[idx])
+        row["demos_used_mean"], row["demos_used_ci95"] = mean_ci95(final_demos)
+        row["upside_down_late_mean"], row["upside_down_late_ci95"] = mean_ci95(flipped[idx])
+        row["upside_down_source"] = flipped_source
+        row["expert_return"] = expert
+        row["env_steps_per_second"] = sps
+        row["periods"] = int(periods)
+        row["env_steps"] = int(steps[-1]) if periods else 0
+        rows.append(row)
+    return rows
+
+
+def format_mean_ci(mean: float, ci: float) -> str:
+    """Format as "mean ± ci", rounded to two significant digits of the CI.
+
+    Never more precise than 4 decimals nor coarser than whole numbers; "± n/a" when the CI is
+    unknown (one seed).
+    """
+    if not math.isfinite(mean):
+        return "nan"
+    if math.isfinite(ci) and ci > 0:
+        decimals = min(4, max(0, 1 - math.floor(math.log10(ci))))
+    else:
+        magnitude = abs(mean)
+        if magnitude == 0 or float(mean).is_integer():
+            decimals = 0
+        else:
+            decimals = min(4, max(0, 2 - math.floor(math.log10(magnitude))))
+    ci_text = f"{ci:.{decimals}f}" if math.isfinite(ci) else "n/a"
+    return f"{mean:.{decimals}f} ± {ci_text}"
+
+
+def _format_percent(mean: float, ci: float) -> str:
+    """A fraction as "mean ± ci %", or n/a."""
+    if not math.isfinite(mean):
+        return "n/a"
+    return f"{100 * mean:.0f} ± {100 * ci:.0f} %" if math.isfinite(ci) else f"{100 * mean:.0f} %"
+
+
+def _format_field(value: Any) -> str:
+    """A swept field's value for the Markdown table."""
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
+    """The Markdown summary: a header stating what the numbers are, then one table row per cell."""
+    config = run.config
+    cfg = config.get("config", {})
+    total = int(cfg.get("total_env_steps") or 0)
+    last = rows[0]["env_steps"] if rows else 0
+    seeds = config.get("seeds", [])
+    seed_counts = sorted({row["n_seeds"] for row in rows})
+    per_cell = "/".join(str(n) for n in seed_counts)
+    lines = [f"# Sweep summary: {run.path.name}", ""]
+    if run.partial:
+        note = (
+            f"**Partial run directory**: {run.periods} of {run.expected_periods} evaluation "
+            f"periods present ({last:,} of {total:,} env steps per run)"
+        )
+        if run.missing_runs:
+            note += f", {run.missing_runs} runs not in metrics.npz yet"
+        lines += [
+            note + "; the sweep is probably still running and every number below is over "
+            "the periods present.",
+            "",
+        ]
+    header = [
+        f"Env steps per run: {last:,}" + (f" of {total:,}" if total and total != last else ""),
+        f"env: {cfg.get('env_name', '?')}",
+        f"cells: {len(rows)}",
+        f"seeds per cell: {per_cell} ({seeds})",
+    ]
+    expert = expert_return(run)
+    if math.isfinite(expert):
+        header.append(f"expert return: {expert:.1f}")
+    sps = run.timing.get("env_steps_per_second")
+    if sps is not None:
+        header.append(f"throughput: {float(sps):,.0f} env steps/s (all runs together)")
+    lines += [" · ".join(header) + ".", ""]
+    lines += [
+        "Cells are mean ± half-width of the 95% confidence interval of the mean over seeds "
+        "(Student's t, n − 1 dof; n/a with one seed). Final return: evaluation return at the last "
+        "evaluation present. AUC: mean evaluation return over all evaluation points present. "
+        "Demos: cumulative demonstrated env steps at the end. Upside down: % of the visited "
+        "training states with the torso upside down (|pitch| > 90°) in the last 30% of the "
+        "periods present (the flipped gait; HalfCheetah only)."
+        + (
+            " Here from the saved sample of visited states (recorded before the per-period "
+            "metric existed)."
+            if rows and rows[0]["upside_down_source"] == "sample"
+            else ""
+        ),
+        "",
+    ]
+    if config.get("command"):
+        lines += [f"Command: `{config['command']}`", ""]
+
+    fields = swept_fields(run)
+    columns = [
+        "cell",
+        *(fields or ["label"]),
+        "seeds",
+        "final return",
+        "AUC (mean return)",
+        "demos used",
+        "upside down (last 30%)",
+    ]
+    lines.append("| " + " | ".join(columns) + " |")
+    text_columns = {"label"} | {f for f in fields if any(isinstance(row[f], str) for row in rows)}
+    lines.append("|" + "|".join("---" if c in text_columns else "---:" for c in columns) + "|")
+    for row in rows:
+        values = [str(row["cell"])]
+        values += [_format_field(row[f]) for f in fields] if fields else [row["cell_label"] or "-"]
+        values += [
+            str(row["n_seeds"]),
+            format_mean_ci(row["final_return_mean"], row["final_return_ci95"]),
+            format_mean_ci(row["auc_mean"], row["auc_ci95"]),
+            format_mean_ci(row["demos_used_mean"], row["demos_used_ci95"]),
+            _format_percent(row["upside_down_late_mean"], row["upside_down_late_ci95"]),
+        ]
+        lines.append("| " + " | ".join(values) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def write_summary(run_dir: str | Path) -> tuple[Path, Path]:
+    """Write ``summary.csv`` (one row per cell, columns as in `summarize`) and ``summary.md`` (a
+    Markdown table of "mean ± ci" cells under a header stating env steps, seeds and what the CI is)
+    into the run directory and return their paths."""
+    run = load_run(run_dir)
+    rows = summarize(run)
+    columns = ["cell", "cell_label", *swept_fields(run), *STAT_COLUMNS]
+    csv_path = run.path / SUMMARY_CSV
+    with csv_path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=columns)
+        writer.writeheader()
+        writer.writerows(rows)
+    md_path = run.path / SUMMARY_MD
+    md_path.write_text(_markdown(run, rows))
+    return csv_path, md_path
+
+
+GROUP_COLUMNS: tuple[str, ...] = ("member", "agent", "cell", "cell_label", *STAT_COLUMNS)
+"""Columns of a group summary row (`write_group_summary`)."""
+
+
+def summarize_group(group_dir: str | Path) -> list[dict[str, Any]]:
+    """`summarize` of every member, each row with its member name and agent family in front."""
+    rows = []
+    for member in group_members(group_dir):
+        run = load_run(member)
+        rows += [{"member": member.name, "agent": run.agent, **row} for row in summarize(run)]
+    return rows
+
+
+def write_group_summary(group_dir: str | Path) -> tuple[Path, Path]:
+    """summary.csv and summary.md of a group: one table, a row per (member, cell)."""
+    group_dir = Path(group_dir)
+    rows = summarize_group(group_dir)
+    csv_path = group_dir / SUMMARY_CSV
+    with csv_path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=GROUP_COLUMNS, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows)
+    command = json.loads((group_dir / GROUP_FILE).read_text()).get("command", "")
+    steps = sorted({row["env_steps"] for row in rows})
+    lines = [
+        f"# Group summary: {group_dir.name}",
+        "",
+        f"One compiled program per agent family; env steps per run at the last evaluation: "
+        f"{', '.join(f'{s:,}' for s in steps)}. Mean ± half-width of the 95% CI over seeds "
+        "(Student's t). Per-member details are in each member's own summary.md.",
+        "",
+    ]
+    if command:
+        lines += [f"Command: `{command}`", ""]
+    lines += [
+        "| agent | cell | seeds | final return | AUC (mean return) | demos used |"
+        " upside down (last 30%) |",
+        "|---|---|---:|---:|---:|---:|---:|",
+    ]
+    for row in rows:
+        lines.append(
+            f"| {row['agent']} | {row['cell_label'] or '-'} | {row['n_seeds']} | "
+            f"{format_mean_ci(row['final_return_mean'], row['final_return_ci95'])} | "
+            f"{format_mean_ci(row['auc_mean'], row['auc_ci95'])} | "
+            f"{format_mean_ci(row['demos_used_mean'], row['demos_used_ci95'])} | "
+            f"{_format_percent(row['upside_down_late_mean'], row['upside_down_late_ci95'])} |"
+        )
+    md_path = group_dir / SUMMARY_MD
+    md_path.write_text("\n".join(lines) + "\n")
+    return csv_path, md_path
