@@ -106,8 +106,7 @@ def test_mjx_reward_is_forward_velocity_minus_control_cost():
     """Brax's halfcheetah (brax/envs/half_cheetah.py): r = 1.0 (x' - x) / dt - 0.1 sum(a^2), x the
     torso's x position before and after the step and dt = 5 frames x the model's 0.01 s timestep =
     0.05 s, x read as Brax reads it (the body positions MJX's state holds after the step). Worked
-    out here from the states over 10 steps of random actions. The reset and step programs are
-    those tests/test_envs.py compiles (same env, shapes and keys): one persistent-cache entry."""
+    out here from the states over 10 steps of random actions."""
     env = make_env(Config(backend="mjx"))
     from brax import envs as brax_envs
 
