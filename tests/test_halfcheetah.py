@@ -3,19 +3,24 @@ compiling on CPU) and MuJoCo's C engine through a host callback (seconds).
 
 Checks what only the physics can show: every episode starts from a fresh random initial state (not
 Brax's AutoResetWrapper's frozen first state), the true next observation is stored at the time
-limit with terminated = 0 (bootstrap through truncation), and rewards/evaluation are sane.
+limit with terminated = 0 (bootstrap through truncation), MJX's rewards are Brax's formula worked
+out from the bodies' positions, and the training return is the sum of the stored rewards. The
+upside-down fraction of an evaluation is checked on constructed states (no physics).
 """
 
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from arld_jax.config import Config, hparams_from_config
+from arld_jax.envs import Env, EnvState, halfcheetah_upside_down, make_env
+from arld_jax.evaluate import evaluate_policy
 from arld_jax.train import make_train
 
-pytestmark = pytest.mark.slow
+slow = pytest.mark.slow  # compiles MuJoCo-MJX, or the training loop with each physics
 
 
 @pytest.fixture(scope="module", params=["mjx", "mujoco"])
@@ -40,7 +45,8 @@ def cheetah_run(request):
     return cfg, state, metrics
 
 
-def test_dimensions_and_finite_metrics(cheetah_run):
+@slow
+def test_dimensions_and_the_training_return_is_the_stored_rewards(cheetah_run):
     cfg, state, metrics = cheetah_run
     data = state.replay.data
     assert data.obs.shape == (cfg.replay_capacity, 17)
@@ -48,10 +54,17 @@ def test_dimensions_and_finite_metrics(cheetah_run):
     assert int(state.replay.size) == cfg.total_env_steps
     for name in ("eval_return", "critic_loss", "actor_loss", "sigma"):
         assert np.all(np.isfinite(np.asarray(getattr(metrics, name)))), name
-    # Episodes finished in every period (40-step episodes, 60 iterations per period).
-    assert np.all(np.isfinite(np.asarray(metrics.train_return)))
+    # 120 iterations of 2 envs: episodes of 40 end at iterations 39 (period 0: iterations 0-59),
+    # 79 and 119 (period 1). An episode's return is its env-mean sum of the stored (unscaled)
+    # rewards; a period's training return is the mean over the episodes that ended in it.
+    reward = np.asarray(data.reward, np.float64).reshape(cfg.num_iterations, cfg.num_envs)
+    episodes = reward.reshape(-1, cfg.episode_length, cfg.num_envs).sum(axis=1).mean(axis=1)
+    np.testing.assert_allclose(
+        np.asarray(metrics.train_return), [episodes[0], episodes[1:].mean()], rtol=1e-5
+    )
 
 
+@slow
 def test_fresh_initial_state_every_episode_and_true_next_obs(cheetah_run):
     cfg, state, metrics = cheetah_run
     data = state.replay.data
@@ -73,6 +86,7 @@ def test_fresh_initial_state_every_episode_and_true_next_obs(cheetah_run):
     assert float(np.asarray(data.terminated).max()) == 0.0
 
 
+@slow
 def test_gait_metric_matches_the_visited_states(cheetah_run):
     """The per-period upside-down fraction is the mean of `gait.upside_down` over the states the
     run visited in that period (checked against the replay, which holds every visited state here),
@@ -85,5 +99,71 @@ def test_gait_metric_matches_the_visited_states(cheetah_run):
     np.testing.assert_allclose(np.asarray(metrics.upside_down), expected, atol=1e-6)
     starts = obs.reshape(cfg.num_iterations, cfg.num_envs, 17)[:: cfg.episode_length]
     assert not np.any(gait.upside_down(starts))
-    flipped = np.asarray(metrics.eval_upside_down)
-    assert np.all((flipped >= 0) & (flipped <= 1))
+
+
+@slow
+def test_mjx_reward_is_forward_velocity_minus_control_cost():
+    """Brax's halfcheetah (brax/envs/half_cheetah.py): r = 1.0 (x' - x) / dt - 0.1 sum(a^2), x the
+    torso's x position before and after the step and dt = 5 frames x the model's 0.01 s timestep =
+    0.05 s, x read as Brax reads it (the body positions MJX's state holds after the step). Worked
+    out here from the states over 10 steps of random actions."""
+    env = make_env(Config(backend="mjx"))
+    from brax import envs as brax_envs
+
+    torso = brax_envs.get_environment("halfcheetah", backend="mjx").sys.mj_model.body("torso").id
+    state = jax.jit(env.reset, static_argnums=1)(jax.random.key(3), 2)
+    step = jax.jit(env.step)
+    actions = jax.random.uniform(jax.random.key(4), (10, 2, 6), minval=-1.0, maxval=1.0)
+    velocities = []
+    for t in range(10):
+        nxt = step(state, actions[t])
+        x0, x1 = (np.asarray(s.inner.pipeline_state.xpos[:, torso, 0]) for s in (state, nxt))
+        velocity = (x1 - x0) / 0.05
+        ctrl_cost = np.sum(np.square(np.asarray(actions[t])), axis=-1)
+        np.testing.assert_allclose(
+            nxt.reward, velocity - 0.1 * ctrl_cost, rtol=1e-4, atol=1e-4, err_msg=f"step {t}"
+        )
+        velocities.append(velocity)
+        state = nxt
+    assert np.max(np.abs(velocities)) > 0.1  # the torso moved: the velocity term was tested
+
+
+def _pitched_env(pitch0: float, rate: float) -> Env:
+    """A stand-in with HalfCheetah's observation whose root pitch (obs[..., 1]) is
+    pitch0 + rate * t at step t; every other entry 0, rewards 0."""
+
+    def obs_at(t: jax.Array) -> jax.Array:
+        return jnp.zeros((*t.shape, 17)).at[..., 1].set(pitch0 + rate * t)
+
+    def reset(key, n):  # noqa: ANN001, ANN202
+        t = jnp.zeros(n)
+        return EnvState(inner=t, obs=obs_at(t), reward=jnp.zeros(n), terminated=jnp.zeros(n))
+
+    def step(state, action):  # noqa: ANN001, ANN202
+        t = state.inner + 1
+        return EnvState(
+            inner=t, obs=obs_at(t), reward=jnp.zeros_like(t), terminated=jnp.zeros_like(t)
+        )
+
+    return Env(
+        reset=reset, step=step, obs_dim=17, action_dim=6, upside_down=halfcheetah_upside_down
+    )
+
+
+@pytest.mark.parametrize(
+    "pitch0, rate, flipped",
+    [
+        (0.0, 0.0, 0.0),  # upright throughout
+        (np.pi, 0.0, 1.0),  # on its back throughout
+        (2 * np.pi, 0.0, 0.0),  # a full turn: upright again
+        # pitches 0.0, 0.1, ..., 3.9 of the 40 evaluated states: |pitch| > pi/2 from t = 16 on
+        (0.0, 0.1, 24 / 40),
+    ],
+)
+def test_evaluation_counts_the_upside_down_states(pitch0: float, rate: float, flipped: float):
+    """The evaluation's upside-down fraction (PeriodMetrics.eval_upside_down) is the share of the
+    states it visits with the torso upside down, each state counted before its step."""
+    policy = lambda obs: jnp.zeros((obs.shape[0], 6))  # noqa: E731
+    env = _pitched_env(pitch0, rate)
+    _, fraction = evaluate_policy(env, policy, jax.random.key(0), 2, 40)
+    assert float(fraction) == pytest.approx(flipped, abs=1e-6)

@@ -264,6 +264,26 @@ def test_strategy_none_never_queries() -> None:
     assert not res["new_query"].any() and not res["is_demo"].any() and res["final_used"] == 0
 
 
+def test_each_strategy_name_selects_its_rule() -> None:
+    """A Config's strategy name reaches `wants_query` as the rule it names. (Every other test here
+    passes the ids `query.NONE` ... directly, so this is where a name and an id could disagree.)
+    64 envs against a full window of zeros: the first 32 at u = 1 (above every window value, so
+    the active rule asks there), the other 32 at u = -1 (it does not); b = 0.5, so the Bernoulli
+    rule asks at about half of them anywhere (Binomial(64, 0.5): 32 +- 4; bound 10..54)."""
+    qs = query.init_query_state(64, N_SMALL).replace(window_count=jnp.int32(N_SMALL))
+    u = jnp.concatenate([jnp.ones(32), -jnp.ones(32)])
+    high = np.arange(64) < 32
+    want = {}
+    for name in config.STRATEGIES:
+        hp = config.hparams_from_config(config.tiny(strategy=name, query_prob=0.5, t_query=0.1))
+        want[name] = np.asarray(query.wants_query(qs, jax.random.key(0), u, hp))
+    assert not want["none"].any()
+    assert want["greedy"].all()
+    np.testing.assert_array_equal(want["active"], high)
+    assert 10 < want["bernoulli"].sum() < 54
+    assert want["bernoulli"][~high].any() and not want["bernoulli"][high].all()
+
+
 def test_simulator_compiles_once_for_all_hparams() -> None:
     """Strategy, b, t_query, C and budget are traced values: changing them never retraces."""
     sim = _simulator(7, "all")  # a window size no other test uses

@@ -1,7 +1,8 @@
-"""Tests for arld_jax.results (summary table) and arld_jax.plots (figures) on synthetic run dirs.
+"""Tests for arld_jax.results (summary table, comparisons, the gait summary) on synthetic run dirs.
 
-No JAX here (but for one test of the `compare` command): the run directories are written by hand in the format of arld_jax.run, with numbers
-chosen so that every summary value can be worked out on paper.
+No JAX here (but for one test of the `compare` command): the run directories are written by hand
+in the format of arld_jax.run (`write_run_dir`, also used by tests/test_plots.py for the figures),
+with numbers chosen so that every summary value can be worked out on paper.
 """
 
 from __future__ import annotations
@@ -16,7 +17,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from matplotlib.image import imread
 from scipy import stats as scipy_stats
 
 from arld_jax import compare, plots, rundir, stats, summary
@@ -301,71 +301,6 @@ def test_missing_files_raise_helpful_errors(tmp_path: Path) -> None:
         summary.write_summary(run_dir)
     with pytest.raises(FileNotFoundError, match="metrics.npz"):
         plots.plot_all(run_dir)
-
-
-def test_uncertainty_is_cut_at_budget_depletion(run_dir: Path) -> None:
-    run = rundir.load_run(run_dir)
-    x = plots.trace_env_steps(run)
-    # period p, slice j -> (p + (j + 1) / 5) * 1000: 200, 400, ..., 4000
-    np.testing.assert_allclose(x[:3], [200.0, 400.0, 600.0])
-    assert x[-1] == 4000.0 and x.size == PERIODS * TRACES
-    bernoulli_runs = [3, 4, 5]  # cell 1, seeds 0, 1, 2 (see DEMO_RATE)
-    lengths = [plots.uncertainty_before_depletion(run, r)[1].size for r in bernoulli_runs]
-    assert lengths == [20, 17, 13]
-    # a run that never queries keeps its whole trace
-    assert plots.uncertainty_before_depletion(run, 0)[1].size == 20
-
-
-def _png_ok(path: Path) -> bool:
-    return path.stat().st_size > 1000 and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-
-
-def test_plot_all_without_active_cells_skips_fig7(run_dir: Path) -> None:
-    paths = plots.plot_all(run_dir)
-    assert {p.stem for p in paths} == {
-        "fig3_uncertainty",
-        "fig4_5_returns",
-        "fig6_bernoulli",
-        "fig8_states",
-        "fig9_budget",
-    }
-    assert all(p.parent == run_dir / "figures" and _png_ok(p) for p in paths)
-    assert not (run_dir / "figures" / "fig7_active.png").exists()
-
-
-def test_plot_all_full_sweep_has_every_figure_and_split_panels(tmp_path: Path) -> None:
-    cells = [
-        {"strategy": "none", "uncertainty": "intrinsic"},
-        {"strategy": "active", "uncertainty": "intrinsic", "t_query": 0.1},
-        {"strategy": "active", "uncertainty": "intrinsic", "t_query": 0.3},
-        {"strategy": "bernoulli", "uncertainty": "extrinsic", "query_prob": 0.2},
-        {"strategy": "bernoulli", "uncertainty": "extrinsic", "query_prob": 0.4},
-        {"strategy": "active", "uncertainty": "extrinsic", "t_query": 0.1},
-    ]
-    sweep = {
-        "strategy": ["none", "bernoulli", "active"],
-        "uncertainty": ["intrinsic", "extrinsic"],
-        "query_prob": [0.2, 0.4],
-        "t_query": [0.1, 0.3],
-    }
-    run_dir = write_run_dir(tmp_path / "full", cells, sweep, periods=3, total_periods=4)
-    paths = {p.stem: p for p in plots.plot_all(run_dir)}
-    assert set(paths) == set(plots.FIGURES) - {"gait"}  # the toy env has no gait
-    assert all(_png_ok(p) for p in paths.values())
-    # both uncertainty measures present -> Fig. 4 and Fig. 5 side by side (a wide image)
-    height, width = imread(paths["fig4_5_returns"]).shape[:2]
-    assert width > 1.8 * height
-
-
-def test_plot_all_without_queries_draws_whole_run_uncertainty(tmp_path: Path) -> None:
-    run_dir = write_run_dir(
-        tmp_path / "sac", [{"strategy": "none"}], {}, periods=PERIODS, expert=None
-    )
-    run = rundir.load_run(run_dir)
-    fig = plots.fig3_uncertainty(run)
-    assert fig is not None and "whole run" in fig.get_suptitle()
-    drawn = [name for name, make in plots.FIGURES.items() if make(run) is not None]
-    assert drawn == ["fig3_uncertainty", "fig4_5_returns"]
 
 
 def test_upside_down_late_from_period_metric(tmp_path: Path) -> None:
