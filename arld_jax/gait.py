@@ -3,7 +3,7 @@
 Brax's halfcheetah observes qpos[1:] then qvel, and qpos = (rootx, rootz, rooty, joints...), so
 obs[..., 1] is the root's pitch angle (rooty, a hinge: unbounded, hence the wrap). Running on its
 back ("the flipped cheetah") is a well-known local optimum of SAC on this task; a run that learns
-it has most of its visited states upside down. No JAX import: `results.py` uses it on saved arrays.
+it has most of its visited states upside down. No JAX import: `summary.py` uses it on saved arrays.
 """
 
 from __future__ import annotations

@@ -3,10 +3,10 @@
 Each figure function returns a matplotlib `Figure`; the tests read back its lines (x and y data),
 bands, error bars, scatter points, legend texts, titles and axis labels, and compare them with
 values computed here straight from the files (``metrics.npz`` and ``runs.json``), not through
-`arld_jax.rundir`. The run directories are those of tests/test_results.py (`write_run_dir`),
+`arld_jax.stats`. The run directories are those of tests/test_results.py (`write_run_dir`),
 with seed 2's returns raised by SKEW so that a cell's mean over seeds is not its median:
 eval_return[run, p] = 100 (cell + 1)(p + 1) + (0, 10, 60) for seeds (0, 1, 2), whose mean over
-seeds (+ 70 / 3) and 95% CI can be worked out on paper. No JAX.
+seeds (+ 70 / 3) and 95% CI can be worked out on paper.
 """
 
 from __future__ import annotations

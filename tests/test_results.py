@@ -1,7 +1,8 @@
-"""Tests for arld_jax.results (summary table, comparisons, the gait summary) on synthetic run dirs.
+"""Tests of reading results back (arld_jax.rundir's reader, stats, summary, compare: the summary
+table, comparisons, the gait summary) on synthetic run directories.
 
-No JAX here (but for one test of the `compare` command): the run directories are written by hand
-in the format of arld_jax.run (`write_run_dir`, also used by tests/test_plots.py for the figures),
+No training here (but for one test of the `compare` command): the run directories are written by
+hand in the format of arld_jax.run (`write_run_dir`, also used by tests/test_plots.py),
 with numbers chosen so that every summary value can be worked out on paper.
 """
 
