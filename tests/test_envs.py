@@ -109,19 +109,35 @@ def test_mujoco_backend_is_brax_halfcheetah_in_c():
     """Same key: bit-identical initial states to the 'mjx' backend; the same actions for 10 steps:
     the same observations and rewards to within float32 drift (the two engines differ only in
     their arithmetic, float64 in C against float32 in MJX; over tens more steps the chaotic
-    trajectories part). Compiles one MJX step (about a minute on CPU)."""
+    trajectories part). MJX's reward is also worked out from its states: Brax's halfcheetah
+    (brax/envs/half_cheetah.py), r = 1.0 (x' - x) / dt - 0.1 sum(a^2), x the torso's x position
+    before and after the step, dt = 5 frames x the model's 0.01 s = 0.05 s. Compiles one MJX step
+    (about a minute on CPU)."""
+    from brax import envs as brax_envs
+
     c, mjx = make_env(Config(backend="mujoco")), make_env(Config(backend="mjx"))
     assert (c.obs_dim, c.action_dim) == (mjx.obs_dim, mjx.action_dim) == (17, 6)
+    torso = brax_envs.get_environment("halfcheetah", backend="mjx").sys.mj_model.body("torso").id
     key = jax.random.key(3)
     sc = jax.jit(c.reset, static_argnums=1)(key, 2)
     sm = jax.jit(mjx.reset, static_argnums=1)(key, 2)
     np.testing.assert_array_equal(sc.obs, sm.obs)
     step_c, step_m = jax.jit(c.step), jax.jit(mjx.step)
     actions = jax.random.uniform(jax.random.key(4), (10, 2, 6), minval=-1.0, maxval=1.0)
+    velocities = []
     for t in range(10):
+        before = sm
         sc, sm = step_c(sc, actions[t]), step_m(sm, actions[t])
         np.testing.assert_allclose(sc.obs, sm.obs, atol=2e-3, err_msg=f"step {t}")
         np.testing.assert_allclose(sc.reward, sm.reward, atol=2e-3, err_msg=f"step {t}")
+        x0, x1 = (np.asarray(s.inner.pipeline_state.xpos[:, torso, 0]) for s in (before, sm))
+        velocity = (x1 - x0) / 0.05
+        ctrl_cost = np.sum(np.square(np.asarray(actions[t])), axis=-1)
+        np.testing.assert_allclose(
+            sm.reward, velocity - 0.1 * ctrl_cost, rtol=1e-4, atol=1e-4, err_msg=f"step {t}"
+        )
+        velocities.append(velocity)
+    assert np.max(np.abs(velocities)) > 0.1  # the torso moved: the velocity term was tested
     assert float(jnp.max(jnp.abs(sc.obs - sm.obs))) > 0  # two engines, not one
     assert float(jnp.max(jnp.abs(sc.obs - c.reset(key, 2).obs))) > 0.1  # it moved
 
