@@ -22,8 +22,9 @@ def compiler_options() -> dict[str, Any]:
 
     On CPU, region-based copy insertion. Without it XLA:CPU copies buffers that nested loops update
     in place: the sum tree twice per iteration (8 seed-vmapped 1M buffers: 24-32 ms per iteration
-    instead of 2), and the replay's data under `only_if` (benchmarks/README.md, "Where the trainer's 'other' time is not, and one copy per iteration"). It
-    changes which copies are made, not what is computed. Other backends: no options.
+    instead of 2), and the replay's data under `only_if` (benchmarks/README.md, "Where the
+    trainer's 'other' time is not, and one copy per iteration"). It changes which copies are made,
+    not what is computed. Other backends: no options.
 
     Also switches JAX's CPU lowering of the threefry generator to unrolled
     (`unroll_threefry_on_cpu`), so every program built with these options gets it."""
@@ -38,8 +39,9 @@ def unroll_threefry_on_cpu() -> bool:
     the 5-trip rolled loop it uses on CPU to save compile time. The same rounds on the same bits,
     so every random number is unchanged (tested); the update draws at least four times (its
     noises, the replay sample) and ran 1.08x faster with it, at the same compile time
-    (benchmarks/README.md, "Brax's SAC trainer against arld_jax, side by side"). It uses JAX internals (`jax._src.random.threefry2x32`):
-    when they are not there, nothing changes and it returns False. Idempotent; process-wide, so
+    (benchmarks/README.md, "Brax's SAC trainer against arld_jax, side by side"). It uses JAX
+    internals (`jax._src.random.threefry2x32`): when they are not there, nothing changes and it
+    returns False. Idempotent; process-wide, so
     it also applies to programs jitted later without `compiler_options`."""
     try:
         from jax._src.interpreters import mlir

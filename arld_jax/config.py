@@ -123,9 +123,9 @@ class Config(*AGENT_OPTIONS):
     """Whether the compiled program may hold a noisy agent (Noisy SAC / Noisy TD3: a run with
     uncertainty 'extrinsic'). False builds the actor's mean head without its weight-noise draws: the
     same parameters and, since plain runs scale that noise by 0, bit-identical results, in about an
-    eighth less update time on the 2-core CPU (benchmarks/README.md, "Brax's SAC trainer against arld_jax, side by side"). Sweeps set it for their
-    program (`Sweep.program_config`: False when no run is noisy); False with uncertainty 'extrinsic'
-    is an error."""
+    eighth less update time on the 2-core CPU (benchmarks/README.md, "Brax's SAC trainer against
+    arld_jax, side by side"). Sweeps set it for their program (`Sweep.program_config`: False when
+    no run is noisy); False with uncertainty 'extrinsic' is an error."""
     matmul_dtype: str = "float32"
     """Dtype of matmul inputs in the MLPs ('bfloat16' uses AMX/tensor cores; accumulation stays f32)."""
 

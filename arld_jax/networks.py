@@ -34,9 +34,10 @@ def head_matmul(x: jax.Array, w: jax.Array) -> jax.Array:
     256x256x6, where the forward x @ w takes 11 us. Writing x^T out first (`optimization_barrier`
     keeps XLA from folding the transpose back into the dot) turns it into a plain row-major
     product: 36 us. Both heads of `Actor` read the same phi, so XLA computes its transpose once.
-    The whole 16-env trainer ran 1.10-1.12x faster with it (benchmarks/README.md, "Where the update's time went, and three changes");
-    on the 256-wide hidden layers the same form made the update slower (0.94-0.97x, "Why the weight gradients are the slow dots, and why that does not help"),
-    so only the heads use it. On a GPU it costs one small transpose. Not bit-identical
+    The whole 16-env trainer ran 1.10-1.12x faster with it (benchmarks/README.md, "Where the
+    update's time went, and three changes"); on the 256-wide hidden layers the same form made the
+    update slower (0.94-0.97x, "Why the weight gradients are the slow dots, and why that does not
+    help"), so only the heads use it. On a GPU it costs one small transpose. Not bit-identical
     to autodiff's x^T g (another summation order over the batch); learning with it is checked in
     experiments/README.md."""
     return x @ w

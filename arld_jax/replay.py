@@ -252,7 +252,8 @@ def make_prioritized_replay(
         tree = state.tree
         chex.assert_shape(tree, (2 * num_leaves,))
         # Row j holds node j's children (tree[2j], tree[2j + 1]): one gather per level, not two
-        # (the same values; 1.2x faster replay work, benchmarks/README.md, "Where the update's time went, and three changes").
+        # (the same values; 1.2x faster replay work, benchmarks/README.md, "Where the update's
+        # time went, and three changes").
         children_of = tree.reshape(num_leaves, 2)
         total = tree[1]
         # Stratified sampling (Schaul App. B.2.1): split [0, total) into batch_size equal
