@@ -31,6 +31,7 @@ from arld_jax.stats import (
     BOOTSTRAP_REPS,
     area_under_curve,
     bootstrap_difference,
+    welch_ci95,
 )
 from arld_jax.summary import summarize
 
@@ -207,14 +208,16 @@ def _interval(row: dict[str, Any]) -> tuple[float, float]:
 
 
 def _cell_text(row: dict[str, Any]) -> str:
+    """A cell's final return: mean [95% interval]."""
     lo, hi = _interval(row)
-    return f"{row['cell_label'] or 'base'}: {row['final_return_mean']:,.0f} [{lo:,.0f}, {hi:,.0f}]"
+    return f"{row['final_return_mean']:,.0f} [{lo:,.0f}, {hi:,.0f}]"
 
 
 def plain_reading(run_dir: str | Path | RunDir) -> str:
     """A few sentences a newcomer can read instead of the table: each querying cell's final return
-    against plain SAC's (same uncertainty measure), with their 95% intervals and whether those
-    overlap; the best querying cell; the expert's return; the gait; where the figures are."""
+    against the same agent without demonstrations (same uncertainty measure), with the difference
+    and Welch's 95% interval of it (separated only when it excludes 0, see `welch_ci95`); whether
+    asking for demonstrations beat not asking; the expert's return; the gait; where the figures are."""
     run = as_run(run_dir)
     rows = summarize(run)
     if not rows or run.periods == 0:
@@ -223,12 +226,19 @@ def plain_reading(run_dir: str | Path | RunDir) -> str:
     seeds = "/".join(str(n) for n in sorted({r["n_seeds"] for r in rows}))
     lines = [
         f"Reading (final evaluation return at {steps:,} env steps per run, mean and 95% interval "
-        f"over {seeds} seeds; intervals that do not overlap mean a difference the seeds support):"
+        f"over {seeds} seeds; a difference is separated when Welch's 95% interval of it excludes 0):"
     ]
+    cells = {c.cell: c for c in group_cells(run)}
+    final = np.asarray(run.metrics["eval_return"], dtype=np.float64)[:, -1]
 
     def field(row: dict[str, Any], name: str, default: str) -> str:
-        cell = next(c for c in group_cells(run) if c.cell == row["cell"])
-        return str(run_field(run, cell.runs[0], name, default))
+        return str(run_field(run, cells[row["cell"]].runs[0], name, default))
+
+    def name(row: dict[str, Any]) -> str:
+        agent = paper_name(
+            field(row, "strategy", "none"), run.agent, field(row, "uncertainty", "intrinsic")
+        )
+        return f"{agent} ({row['cell_label']})" if row["cell_label"] else agent
 
     plain = {
         field(r, "uncertainty", "intrinsic"): r
@@ -236,24 +246,42 @@ def plain_reading(run_dir: str | Path | RunDir) -> str:
         if field(r, "strategy", "none") == "none"
     }
     querying = [r for r in rows if field(r, "strategy", "none") != "none"]
+    separated_above = []
     for row in querying:
         base = plain.get(field(row, "uncertainty", "intrinsic"))
         if base is None:
-            lines.append(f"- {_cell_text(row)}.")
+            lines.append(f"- {name(row)}: {_cell_text(row)}.")
             continue
-        (lo, hi), (blo, bhi) = _interval(row), _interval(base)
-        if lo > bhi:
-            verdict = "above plain SAC, intervals apart"
-        elif hi < blo:
-            verdict = "below plain SAC, intervals apart"
+        a, b = final[cells[row["cell"]].runs], final[cells[base["cell"]].runs]
+        diff = float(np.nanmean(a) - np.nanmean(b))
+        lo, hi = welch_ci95(a, b)
+        if lo > 0:
+            verdict = "above"
+            separated_above.append(row)
+        elif hi < 0:
+            verdict = "below"
         else:
-            verdict = "not separated from plain SAC (intervals overlap)"
-        lines.append(f"- {_cell_text(row)}: {verdict} ({_cell_text(base)}).")
+            verdict = "not separated from"
+        lines.append(
+            f"- {name(row)}: {_cell_text(row)}; {verdict} {name(base)} "
+            f"({diff:+,.0f}, Welch [{lo:,.0f}, {hi:,.0f}])."
+        )
     if not querying:
-        lines += [f"- {_cell_text(r)}." for r in rows]
+        lines += [f"- {name(r)}: {_cell_text(r)}." for r in rows]
     if querying:
         best = max(querying, key=lambda r: r["final_return_mean"])
-        lines.append(f"Best querying cell: {best['cell_label']}.")
+        lines.append(f"Best querying cell: {name(best)}.")
+        if separated_above:
+            lines.append(
+                "Asking for demonstrations beat not asking: "
+                + ", ".join(name(r) for r in separated_above)
+                + " ended above the same agent without them, Welch's interval excluding 0."
+            )
+        elif plain:
+            lines.append(
+                "Asking for demonstrations did not beat not asking here: no querying cell ended "
+                "above the same agent without them with Welch's interval excluding 0."
+            )
     expert = expert_return(run)
     if math.isfinite(expert):
         above = [r["cell_label"] for r in rows if _interval(r)[0] > expert]

@@ -550,17 +550,30 @@ def test_comparison_pairs_are_named_after_the_agent_family(tmp_path: Path) -> No
 
 
 def test_plain_reading_names_which_cells_differ(tmp_path: Path) -> None:
-    """Final returns 400/800/1200 + {0, 10, 20} (half-width 24.84): BQSAC's and AQSAC's intervals
-    lie above plain SAC's; with the seeds' spread made huge for AQSAC, it overlaps SAC instead."""
+    """Final returns SAC 400/410/420, BQSAC 800/810/820, AQSAC 1,200/1,210/1,220 (seeds 0, 1, 2).
+    BQSAC - SAC = +400; each side's variance of the mean is 100 / 3, so the standard error is
+    sqrt(200 / 3) = 8.165 and Welch's df = (200/3)^2 / (2 (100/3)^2 / 2) = 4, t(0.975, 4) = 2.776:
+    [400 - 22.67, 400 + 22.67] = [377, 423], which excludes 0. With AQSAC's seeds at 0/2,000/4,000
+    (sd 2,000) its difference +1,590 has df ~ 2 and t = 4.303: [-3,378, 6,558], not separated."""
     cells = [{"strategy": "none"}, {"strategy": "bernoulli"}, {"strategy": "active"}]
     path = write_run_dir(tmp_path / "r", cells, {"strategy": ["none", "bernoulli", "active"]})
     text = compare.plain_reading(path)
-    assert "strategy=bernoulli: 810 [785, 835]: above plain SAC, intervals apart" in text
-    assert "strategy=active: 1,210 [1,185, 1,235]: above plain SAC" in text
-    assert "Best querying cell: strategy=active." in text
+    assert (
+        "- BQSAC (strategy=bernoulli): 810 [785, 835]; above SAC (strategy=none) "
+        "(+400, Welch [377, 423])." in text
+    )
+    assert "- AQSAC (strategy=active): 1,210 [1,185, 1,235]; above SAC" in text
+    assert "Best querying cell: AQSAC (strategy=active)." in text
+    assert "Asking for demonstrations beat not asking: BQSAC (strategy=bernoulli), AQSAC" in text
     assert "The expert's return is 3,000; no cell's interval is above it." in text
     m = dict(np.load(path / "metrics.npz"))
     m["eval_return"][6:9, -1] = [0.0, 2000.0, 4000.0]  # AQSAC's seeds far apart
     np.savez(path / "metrics.npz", **m)
-    assert "strategy=active: 2,000 [" in compare.plain_reading(path)
-    assert "not separated from plain SAC (intervals overlap)" in compare.plain_reading(path)
+    text = compare.plain_reading(path)
+    assert "- AQSAC (strategy=active): 2,000 [" in text
+    assert "not separated from SAC (strategy=none) (+1,590, Welch [-3,378, 6,558])." in text
+    assert "beat not asking: BQSAC (strategy=bernoulli) ended above" in text
+    # Without a separated cell the reading says so.
+    m["eval_return"][3:6, -1] = [0.0, 1000.0, 2000.0]  # BQSAC's seeds far apart too
+    np.savez(path / "metrics.npz", **m)
+    assert "did not beat not asking here" in compare.plain_reading(path)
