@@ -57,7 +57,7 @@ def paper_name(strategy: str, agent: str = "sac", uncertainty: str = "intrinsic"
     return STRATEGY_PREFIX[strategy] + REGISTRY[agent].variant(uncertainty)
 
 
-ENVS: tuple[str, ...] = ("halfcheetah", "toy")
+ENVS: tuple[str, ...] = ("halfcheetah", "toy", "toy_fall")
 BACKENDS: tuple[str, ...] = ("mjx", "mujoco", "generalized", "positional", "spring")
 REDUCTIONS: tuple[str, ...] = ("mean", "max", "sum")
 WINDOW_RECORDS: tuple[str, ...] = ("all", "agent")
@@ -73,7 +73,8 @@ class Config(*AGENT_OPTIONS):
 
     # ---- environment (static) ----
     env_name: str = "halfcheetah"
-    """'halfcheetah' (Brax, MuJoCo physics) or 'toy' (a cheap pure-JAX stand-in used by the tests)."""
+    """'halfcheetah' (Brax, MuJoCo physics), or the cheap pure-JAX stand-ins of the tests: 'toy' (never
+    ends early) and 'toy_fall' (an episode ends when the action strays far from the target)."""
     backend: str = "mjx"
     """Physics of halfcheetah: 'mjx' (MuJoCo-MJX through Brax, the default), 'mujoco' (MuJoCo's C
     engine on the host through `jax.pure_callback`: Brax's same model, options, observation and

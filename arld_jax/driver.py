@@ -234,7 +234,7 @@ def expert_for(cfg: Config):  # noqa: ANN202
     from arld_jax.envs import make_env
     from arld_jax.expert import load_expert, read_expert_meta, toy_expert
 
-    if cfg.env_name == "toy" and cfg.expert_path is None:
+    if cfg.env_name in ("toy", "toy_fall") and cfg.expert_path is None:
         return toy_expert()
     if cfg.expert_path is None:
         raise SystemExit(

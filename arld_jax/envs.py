@@ -46,6 +46,7 @@ class Env(NamedTuple):
     obs_dim: int
     action_dim: int
     upside_down: Callable[[jax.Array], jax.Array]  # obs [..., obs_dim] -> bool [...] (the gait)
+    can_terminate: bool = False  # static: whether `step` can ever set `terminated` (a fall)
 
 
 def halfcheetah_upside_down(obs: jax.Array) -> jax.Array:
@@ -66,6 +67,8 @@ def make_env(cfg: Config) -> Env:
     """The batched env named by `cfg.env_name`, its vmapped step limited by `cfg.env_max_batch`."""
     if cfg.env_name == "toy":
         env = _toy_env()
+    elif cfg.env_name == "toy_fall":
+        env = _toy_env(fall_error=TOY_FALL_ERROR)
     elif cfg.backend == "mujoco":
         return mujoco_halfcheetah()  # a host loop: no chunking to tune
     else:
@@ -361,11 +364,18 @@ def toy_target_action(obs: jax.Array) -> jax.Array:
     return jnp.tanh(2.0 * obs @ _TOY_W)
 
 
-def _toy_env() -> Env:
-    """A seconds-to-compile stand-in with HalfCheetah's interface (fixed-length, never terminates).
+TOY_FALL_ERROR = 1.8
+"""`toy_fall` ends an episode (a "fall") when the squared action error exceeds this."""
 
-    reward = 1 - mean_j (a_j - tanh(2 W s)_j)^2, s' = clip(0.9 s + 0.3 [a, -a], -2, 2). The best
-    policy earns 1 per step, always acting 0 about 0.4, uniform-random actions about 0.
+
+def _toy_env(fall_error: float | None = None) -> Env:
+    """A seconds-to-compile stand-in with HalfCheetah's interface.
+
+    reward = 1 - e, e = mean_j (a_j - tanh(2 W s)_j)^2, s' = clip(0.9 s + 0.3 [a, -a], -2, 2). The
+    best policy earns 1 per step, always acting 0 about 0.4, uniform-random actions about 0.
+    With `fall_error` (the `toy_fall` task), a step with e > fall_error terminates the episode: a
+    uniform-random policy falls after about 26 steps on average, the target policy never; the terminal step's
+    reward is paid and nothing after it (the task's stand-in for Hopper's health rule).
     """
 
     def reset(key: PRNGKey, n: int) -> EnvState:
@@ -374,9 +384,12 @@ def _toy_env() -> Env:
 
     def step(state: EnvState, action: jax.Array) -> EnvState:
         s = state.inner
-        reward = 1.0 - jnp.mean(jnp.square(action - toy_target_action(s)), axis=-1)
+        error = jnp.mean(jnp.square(action - toy_target_action(s)), axis=-1)
         s_next = jnp.clip(0.9 * s + 0.3 * jnp.concatenate([action, -action], axis=-1), -2.0, 2.0)
-        return EnvState(inner=s_next, obs=s_next, reward=reward, terminated=jnp.zeros_like(reward))
+        fell = jnp.zeros_like(error) if fall_error is None else (error > fall_error)
+        return EnvState(
+            inner=s_next, obs=s_next, reward=1.0 - error, terminated=fell.astype(jnp.float32)
+        )
 
     return Env(
         reset=reset,
@@ -384,4 +397,5 @@ def _toy_env() -> Env:
         obs_dim=_TOY_OBS_DIM,
         action_dim=_TOY_ACTION_DIM,
         upside_down=never_upside_down,
+        can_terminate=fall_error is not None,
     )
