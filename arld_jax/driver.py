@@ -406,7 +406,8 @@ def evaluate_expert(
 ) -> dict[str, Any]:
     """Roll out the saved expert at `path` deterministically for `episodes` fresh episodes (new
     random initial states, seed `seed`, not a training seed) and report the mean return with its
-    95% CI, every episode's return and the share of its states upside down (`env.upside_down`).
+    95% CI, every episode's return, the share of its states upside down (`env.upside_down`), the share
+    of episodes that ended by a fall and their mean length.
     `backend`: the physics to roll out in (`Config.backend`); None = the one it was trained in."""
     import jax
 
@@ -423,7 +424,8 @@ def evaluate_expert(
     key = jax.random.key(seed)
     act = lambda obs: expert.act(expert.params, obs, key)  # noqa: E731
     episodes_of = jax.jit(lambda k: rollout(env, act, k, episodes, cfg.episode_length))
-    returns, flipped = (np.asarray(x) for x in episodes_of(key))
+    ev = jax.tree.map(np.asarray, episodes_of(key))
+    returns = ev.episode_return
     mean, ci = mean_ci95(returns)
     return {
         "path": str(path),
@@ -433,6 +435,8 @@ def evaluate_expert(
         "return_mean": mean,
         "return_ci95": ci,
         "returns": returns.round(1).tolist(),
-        "upside_down": float(flipped.mean()),
+        "upside_down": float(ev.upside_down.mean()),
+        "fell": float(ev.fell.mean()),
+        "episode_length": float(ev.length.mean()),
         "meta_eval_return": meta.get("eval_return"),
     }

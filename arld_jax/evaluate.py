@@ -4,11 +4,22 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import flax.struct
 import jax
 import jax.numpy as jnp
 
 from arld_jax.envs import Env
 from arld_jax.types import PRNGKey
+
+
+@flax.struct.dataclass
+class Evaluation:
+    """Per episode [num_episodes] (`rollout`), or their means (`evaluate_policy`)."""
+
+    episode_return: jax.Array  # undiscounted return up to the episode's end
+    upside_down: jax.Array  # fraction of the episode's visited states that are upside down
+    fell: jax.Array  # 1.0 where the episode ended by a termination (the task's health rule)
+    length: jax.Array  # steps until the episode ended (the time limit if it never fell)
 
 
 def rollout(
@@ -17,20 +28,40 @@ def rollout(
     key: PRNGKey,
     num_episodes: int,
     episode_length: int,
-) -> tuple[jax.Array, jax.Array]:
-    """Per episode [num_episodes]: the undiscounted return of `policy_fn` (obs [n, obs_dim] ->
-    action [n, A]) over `episode_length` steps from a fresh random initial state, and the fraction
-    of its visited states that are upside down (`env.upside_down`). Episodes run in parallel."""
+) -> Evaluation:
+    """`num_episodes` episodes of `policy_fn` (obs [n, obs_dim] -> action [n, A]) in parallel, each
+    from a fresh random initial state, ending at a termination or after `episode_length` steps.
 
-    def step(state, _):  # noqa: ANN001, ANN202
+    An episode that ended stays frozen in its last state (a select per step, only for tasks that can
+    terminate) and earns nothing more: the terminal step's reward counts, nothing after it."""
+
+    def step(carry, _):  # noqa: ANN001, ANN202
+        state, alive = carry
         flipped = env.upside_down(state.obs)
-        state = env.step(state, policy_fn(state.obs))
-        return state, (state.reward, flipped)
+        nxt = env.step(state, policy_fn(state.obs))
+        reward = jnp.where(alive, nxt.reward, 0.0)
+        if env.can_terminate:
+            nxt = jax.tree.map(
+                lambda n, s: jnp.where(alive.reshape(alive.shape + (1,) * (s.ndim - 1)), n, s),
+                nxt,
+                state,
+            )
+            ended = alive & (nxt.terminated > 0)
+        else:
+            ended = jnp.zeros_like(alive)
+        return (nxt, alive & ~ended), (reward, flipped, alive, ended)
 
-    _, (rewards, flipped) = jax.lax.scan(
-        step, env.reset(key, num_episodes), None, length=episode_length
+    alive0 = jnp.ones(num_episodes, bool)
+    _, (rewards, flipped, alive, ended) = jax.lax.scan(
+        step, (env.reset(key, num_episodes), alive0), None, length=episode_length
     )
-    return jnp.sum(rewards, axis=0), jnp.mean(flipped, axis=0)
+    steps = jnp.sum(alive, axis=0)  # [num_episodes]: steps taken, the terminal one included
+    return Evaluation(
+        episode_return=jnp.sum(rewards, axis=0),
+        upside_down=jnp.sum(flipped & alive, axis=0) / steps,
+        fell=jnp.any(ended, axis=0).astype(jnp.float32),
+        length=steps.astype(jnp.float32),
+    )
 
 
 def evaluate_policy(
@@ -39,7 +70,6 @@ def evaluate_policy(
     key: PRNGKey,
     num_episodes: int,
     episode_length: int,
-) -> tuple[jax.Array, jax.Array]:
-    """The mean over episodes of `rollout`: mean return and upside-down fraction."""
-    returns, flipped = rollout(env, policy_fn, key, num_episodes, episode_length)
-    return jnp.mean(returns), jnp.mean(flipped)
+) -> Evaluation:
+    """The means over episodes of `rollout`."""
+    return jax.tree.map(jnp.mean, rollout(env, policy_fn, key, num_episodes, episode_length))

@@ -21,7 +21,8 @@ Readings of the paper that are ours (documented in the README too):
   below t_query. On a stationary stream this queries at rate ~t_query (tested).
 * C-step demonstrations: a query gives the expert control for min(C, steps left in the episode)
   steps (paper A.1: "C consecutive demonstrations ... until the end of the episode"). Envs inside such
-  a run make no new decision.
+  a run make no new decision. A run also ends when its episode ends early, at a fall (`end_episodes`);
+  its unused steps return to the budget.
 * Budget: counted in demonstrated steps and never exceeded. A query reserves its whole run; when
   several envs query at once, they are granted in env order and the last one may get a shorter run
   (so greedy spends exactly `budget` steps).
@@ -154,3 +155,10 @@ def hand_back(
         demo_remaining=jnp.where(declined, 0, qs.demo_remaining),
     )
     return qs, is_demo & ~declined
+
+
+def end_episodes(qs: QueryState, done: jax.Array) -> QueryState:
+    """Envs whose episode ended (`done` [E]: a fall or the time limit) leave any expert run: a C-step
+    demonstration ends with its episode (paper A.1, "until the end of the episode"), and the steps it
+    had reserved but not used return to the budget (`demos_used` counts executed steps only)."""
+    return qs.replace(demo_remaining=jnp.where(done, 0, qs.demo_remaining))

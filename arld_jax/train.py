@@ -10,8 +10,10 @@ Shape of a run (STYLE.md habit 6):
 
 Everything is pure and jit/vmap-friendly: seeds and sweeps are `jax.vmap(train)` over keys and
 `HParams`. The iteration and period indices come in as scan inputs that are NOT batched under vmap, so
-the branches that skip updates during warm-up (`only_if`) and reset envs at episode ends (`lax.cond`)
-stay real branches (not selects that would run both sides) when vmapped over seeds. The resumable
+the branches that skip updates during warm-up (`only_if`) and reset envs at the time limit of a task
+that never ends early (`lax.cond`) stay real branches (not selects that would run both sides) when
+vmapped over seeds. On a task whose episodes end at a fall (Hopper, Walker2d, Ant), each env ends and
+restarts alone (`episode_ends`, `reset_where`). The resumable
 driver (`run.py`) calls `run_periods` chunk by chunk with the same compiled program.
 """
 
@@ -29,7 +31,7 @@ from arld_jax import query
 from arld_jax.agents import Agent, AgentState, UpdateMetrics, make_agent
 from arld_jax.config import Config, HParams
 from arld_jax.envs import EnvState, make_env
-from arld_jax.evaluate import evaluate_policy
+from arld_jax.evaluate import Evaluation, evaluate_policy
 from arld_jax.expert import Expert, ExpertContext
 from arld_jax.replay import ReplayState, make_prioritized_replay, priority_from_td
 from arld_jax.types import PRNGKey, Transition, example_transition
@@ -88,9 +90,55 @@ class TrainState:
     env: EnvState
     query: query.QueryState
     episode_return: jax.Array  # [num_envs] running return of the current training episodes
+    episode_step: jax.Array  # [num_envs] i32: steps taken in the current training episodes
     visited: StateSample  # uniform sample of visited states
     queried: StateSample  # uniform sample of states where a query started
     key: PRNGKey
+
+
+@flax.struct.dataclass
+class EpisodeEnds:
+    """Sums over the training episodes that end at one iteration (several envs may end at once)."""
+
+    count: jax.Array  # i32: episodes that ended
+    fell: jax.Array  # i32: of those, ended by a termination
+    return_sum: jax.Array  # f32: sum of their returns
+    length_sum: jax.Array  # i32: sum of their lengths
+
+    @staticmethod
+    def of(done: jax.Array, fell: jax.Array, returns: jax.Array, lengths: jax.Array) -> EpisodeEnds:
+        """From per-env [E] arrays: which episodes end (`done`), by a fall, their returns, lengths."""
+        return EpisodeEnds(
+            count=jnp.sum(done).astype(jnp.int32),
+            fell=jnp.sum(done & fell).astype(jnp.int32),
+            return_sum=jnp.sum(jnp.where(done, returns, 0.0)),
+            length_sum=jnp.sum(jnp.where(done, lengths, 0)).astype(jnp.int32),
+        )
+
+
+def episode_ends(
+    terminated: jax.Array, episode_step: jax.Array, length: int
+) -> tuple[jax.Array, jax.Array]:
+    """Which envs' episodes end after this step [E], and which of them by the time limit alone.
+
+    `episode_step` counts the steps taken before this one. An episode ends by a termination (the
+    task's health rule: the critic does not bootstrap, `losses.soft_q_target`) or by truncation at
+    `length` steps (a time limit: the critic bootstraps from the true next state, which the replay
+    stores). A step that is both is a termination: the state itself ended the episode.
+    Returns (done, truncated)."""
+    fell = terminated > 0
+    truncated = (episode_step + 1 >= length) & ~fell
+    return fell | truncated, truncated
+
+
+def reset_where(done: jax.Array, fresh: EnvState, current: EnvState) -> EnvState:
+    """`fresh` for the envs whose episode ended (`done` [E]), `current` for the others, leaf by leaf
+    (every leaf of an EnvState leads with the env axis)."""
+
+    def pick(f: jax.Array, c: jax.Array) -> jax.Array:
+        return jnp.where(done.reshape(done.shape + (1,) * (c.ndim - 1)), f, c)
+
+    return jax.tree.map(pick, fresh, current)
 
 
 @flax.struct.dataclass
@@ -101,7 +149,7 @@ class IterationOutput:
     sigma: jax.Array  # mean sigma_theta(s) over envs and action dims
     demos_used: jax.Array  # cumulative demonstrated steps
     new_queries: jax.Array  # queries started at this iteration
-    finished_return: jax.Array  # mean return of episodes ending here (nan if none)
+    episodes: EpisodeEnds  # training episodes that ended at this iteration
     upside_down: jax.Array  # fraction of envs whose state is upside down (the gait)
     learning: jax.Array  # gradient updates ran at this iteration
     update: UpdateMetrics  # mean over this iteration's updates (zeros in warm-up)
@@ -114,7 +162,12 @@ class PeriodMetrics:
     env_steps: jax.Array  # env steps done at the end of the period
     eval_return: jax.Array  # mean return of the deterministic policy tanh(mu)
     eval_upside_down: jax.Array  # fraction of the evaluation's states that are upside down
+    eval_fell: jax.Array  # fraction of the evaluation episodes that ended by a termination (a fall)
+    eval_episode_length: jax.Array  # mean length of the evaluation episodes
     train_return: jax.Array  # mean return of training episodes finished in the period (nan if none)
+    episodes: jax.Array  # training episodes finished in the period
+    fell: jax.Array  # fraction of them that ended by a termination (nan if none finished)
+    episode_length: jax.Array  # their mean length in env steps (nan if none finished)
     upside_down: jax.Array  # fraction of the visited training states that are upside down (gait)
     critic_loss: jax.Array
     actor_loss: jax.Array
@@ -134,7 +187,7 @@ class Trainer(NamedTuple):
     init: Callable[[PRNGKey, HParams], TrainState]
     run_periods: Callable[[TrainState, HParams, jax.Array, int], tuple[TrainState, PeriodMetrics]]
     train: Callable[[PRNGKey, HParams], tuple[TrainState, PeriodMetrics]]
-    evaluate: Callable[[AgentState, PRNGKey], tuple[jax.Array, jax.Array]]
+    evaluate: Callable[[AgentState, PRNGKey], Evaluation]
     agent: Agent
     cfg: Config
     obs_dim: int
@@ -176,6 +229,7 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
             env=env.reset(k_env, num_envs),
             query=query.init_query_state(num_envs, cfg.window_size),
             episode_return=jnp.zeros(num_envs),
+            episode_step=jnp.zeros(num_envs, jnp.int32),
             visited=init_state_sample(cfg.state_sample_size, env.obs_dim),
             queried=init_state_sample(cfg.state_sample_size, env.obs_dim),
             key=k_run,
@@ -239,10 +293,9 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
 
         # Query: per-env mask; the expert's action replaces the agent's where it is set.
         u = acting.uncertainty  # [num_envs]
-        t = it % length
         allow = has_expert & (cfg.query_during_warmup | ~warm)
         qstate, is_demo, new_query = query.query_step(
-            state.query, k_query, u, length - t, hp, allow, cfg.window_records
+            state.query, k_query, u, length - state.episode_step, hp, allow, cfg.window_records
         )
         context = ExpertContext(
             agent_action=agent_action,
@@ -269,8 +322,8 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
             obs=obs,
             action=action,  # the executed action (the expert's on demonstrated steps)
             reward=next_env.reward,
-            next_obs=next_env.obs,  # true next obs, also at the time limit
-            terminated=next_env.terminated,
+            next_obs=next_env.obs,  # true next obs, also at the time limit (before any reset)
+            terminated=next_env.terminated,  # 1 only at a fall: a time limit keeps bootstrapping
             is_demo=is_demo.astype(jnp.float32),
         )
         # Default: add, then update. `update_before_add`: update on the replay before this
@@ -283,21 +336,36 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
         if cfg.update_before_add:
             replay = per.add(replay, transition)
 
-        # Episode end (a time limit, not a termination): all envs end together; fresh initial states.
+        # Episode ends: by a fall (terminated) or by the time limit (truncated), env by env.
         episode_return = state.episode_return + next_env.reward
-        episode_end = t == length - 1
-        finished_return = jnp.where(episode_end, jnp.mean(episode_return), jnp.nan)
+        episode_length = state.episode_step + 1
+        done, _ = episode_ends(next_env.terminated, state.episode_step, length)
+        episodes = EpisodeEnds.of(done, next_env.terminated > 0, episode_return, episode_length)
+        # A C-step demonstration ends with its episode; its unused steps return to the budget.
+        qstate = query.end_episodes(qstate, done)
         with jax.named_scope("env_reset"):
-            next_env = jax.lax.cond(
-                episode_end, lambda: env.reset(k_reset, num_envs), lambda: next_env
-            )
-            # The agent's per-episode state (Bootstrapped TD3's acting head); in place (only_if).
+            if env.can_terminate:
+                # Envs end at different steps: the ended ones restart alone from fresh random
+                # initial states. `done` is data, so under vmap the reset is computed every step.
+                next_env = reset_where(done, env.reset(k_reset, num_envs), next_env)
+                any_done = jnp.any(done)
+            else:
+                # No task-ended episodes (HalfCheetah): all envs reach the time limit together, at
+                # an iteration known from its index, so the reset is a real branch, taken once per
+                # episode also under vmap (its predicate is unbatched).
+                any_done = it % length == length - 1
+                next_env = jax.lax.cond(
+                    any_done, lambda: env.reset(k_reset, num_envs), lambda: next_env
+                )
+            # The agent's per-episode state (Bootstrapped TD3's acting head, one per run): drawn
+            # anew when an episode of the run ends; in place (only_if).
             agent_state = only_if(
-                episode_end,
+                any_done,
                 lambda s: agent.begin_episode(s, jax.random.fold_in(k_reset, 1)),
                 agent_state,
             )
-        episode_return = jnp.where(episode_end, 0.0, episode_return)
+        episode_return = jnp.where(done, 0.0, episode_return)
+        episode_step = jnp.where(done, 0, episode_length)
 
         env_step = (it + 1) * num_envs
         all_envs = jnp.ones(num_envs, bool)
@@ -307,6 +375,7 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
             env=next_env,
             query=qstate,
             episode_return=episode_return,
+            episode_step=episode_step,
             visited=add_to_state_sample(state.visited, k_vis, obs, all_envs, env_step),
             queried=add_to_state_sample(state.queried, k_qry, obs, new_query, env_step),
             key=key,
@@ -316,15 +385,15 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
             sigma=jnp.mean(acting.sigma),
             demos_used=qstate.demos_used,
             new_queries=jnp.sum(new_query).astype(jnp.int32),
-            finished_return=finished_return,
+            episodes=episodes,
             upside_down=jnp.mean(env.upside_down(obs)),
             learning=~warm,
             update=update_metrics,
         )
         return new_state, out
 
-    def evaluate(agent_state: AgentState, key: PRNGKey) -> tuple[jax.Array, jax.Array]:
-        """Mean return of the agent's deterministic policy, and its upside-down fraction."""
+    def evaluate(agent_state: AgentState, key: PRNGKey) -> Evaluation:
+        """The agent's deterministic policy on fresh episodes (`evaluate.evaluate_policy`)."""
         policy_fn = lambda obs: agent.act_deterministic(agent_state, obs)  # noqa: E731
         return evaluate_policy(env, policy_fn, key, cfg.num_eval_episodes, length)
 
@@ -335,17 +404,23 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
         key, k_eval = jax.random.split(state.key)
         state = state.replace(key=key)
         with jax.named_scope("evaluate"):
-            eval_return, eval_upside_down = evaluate(state.agent, k_eval)
+            ev = evaluate(state.agent, k_eval)
         traces = cfg.traces_per_eval
         learning = out.learning
-        finished = ~jnp.isnan(out.finished_return)
+        ends = jax.tree.map(jnp.sum, out.episodes)
+        per_episode = lambda total: jnp.where(  # noqa: E731
+            ends.count > 0, total / jnp.maximum(ends.count, 1), jnp.nan
+        )
         metrics = PeriodMetrics(
             env_steps=(p + 1) * cfg.eval_every,
-            eval_return=eval_return,
-            eval_upside_down=eval_upside_down,
-            train_return=jnp.where(
-                jnp.any(finished), _masked_mean(out.finished_return, finished), jnp.nan
-            ),
+            eval_return=ev.episode_return,
+            eval_upside_down=ev.upside_down,
+            eval_fell=ev.fell,
+            eval_episode_length=ev.length,
+            train_return=per_episode(ends.return_sum),
+            episodes=ends.count,
+            fell=per_episode(ends.fell.astype(jnp.float32)),
+            episode_length=per_episode(ends.length_sum.astype(jnp.float32)),
             upside_down=jnp.mean(out.upside_down),
             critic_loss=_masked_mean(out.update.critic_loss, learning),
             actor_loss=_masked_mean(out.update.actor_loss, learning),

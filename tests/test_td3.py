@@ -499,8 +499,8 @@ def test_each_agent_learns_the_toy_task(toy_runs) -> None:  # noqa: ANN001
     @jax.jit
     def untrained(keys, hps):  # noqa: ANN001, ANN202
         agent = jax.vmap(trainer.init)(keys, hps).agent
-        ret, _ = jax.vmap(trainer.evaluate)(agent, jax.random.split(jax.random.key(9), len(plain)))
-        return agent, ret
+        ev = jax.vmap(trainer.evaluate)(agent, jax.random.split(jax.random.key(9), len(plain)))
+        return agent, ev.episode_return
 
     sub = lambda tree: jax.tree.map(lambda x: x[plain], tree)  # noqa: E731
     start_agent, start = untrained(keys[plain], sub(hps))

@@ -47,9 +47,9 @@ def test_eval_return_improves_over_untrained_start(toy_sweep):
         jnp.stack([jax.random.key(configs[i].seed) for i in plain]),
         _stack([hparams_from_config(configs[i]) for i in plain]),
     )
-    start, _ = jax.vmap(trainer.evaluate)(
+    start = jax.vmap(trainer.evaluate)(
         untrained.agent, jax.random.split(jax.random.key(9), len(plain))
-    )
+    ).episode_return
     final = np.asarray(metrics.eval_return)[plain, -1]
     # Toy env: best policy earns 1 per step (50 per episode), a random-ish start well below.
     assert np.all(final > np.asarray(start) + 5.0), (final, start)
