@@ -33,7 +33,7 @@ from arld_jax.stats import (
     bootstrap_difference,
     welch_ci95,
 )
-from arld_jax.summary import summarize
+from arld_jax.summary import has_falls, summarize
 
 
 def comparison_pairs(run: RunDir) -> list[tuple[str, Cell, Cell]]:
@@ -304,6 +304,18 @@ def plain_reading(run_dir: str | Path | RunDir) -> str:
             + ", ".join(
                 f"{r['cell_label'] or 'base'} ({100 * r['upside_down_late_mean']:.0f}%)"
                 for r in flipped
+            )
+            + "."
+        )
+    if has_falls(run):
+        lines.append(
+            "Falls (share of the late training episodes that ended by a fall, and their mean "
+            "length): "
+            + ", ".join(
+                f"{r['cell_label'] or 'base'} {100 * r['fell_late_mean']:.0f}% "
+                f"({r['episode_length_late_mean']:,.0f} steps)"
+                for r in rows
+                if math.isfinite(r["fell_late_mean"])
             )
             + "."
         )

@@ -37,6 +37,7 @@ from arld_jax.rundir import (
     swept_fields,
 )
 from arld_jax.stats import mean_ci95, mean_ci95_columns
+from arld_jax.summary import has_falls
 
 DPI = 110
 SMOOTH_WINDOW = 5
@@ -504,6 +505,30 @@ def fig9_budget(run: Run) -> Figure | None:
     return fig
 
 
+def _cell_bands(run: Run, panels: list[tuple[str, str, str, float]], suptitle: str) -> Figure:
+    """One panel per (metric, title, y label, scale): the metric per period and cell, mean and 95%
+    CI over seeds (periods where a seed has no value, nan, are left out of that seed's mean)."""
+    metrics, cells, steps = run.metrics, group_cells(run), env_steps_axis(run)
+    colors = _cell_colors(cells)
+    fig, axes = _new_figure(ncols=len(panels))
+    for ax, (name, title, ylabel, scale) in zip(axes, panels, strict=True):
+        for cell in cells:
+            mean, half = mean_ci95_columns(scale * np.asarray(metrics[name], float)[cell.runs])
+            color = colors[cell.cell]
+            ax.plot(steps, mean, color=color, lw=1.5, label=cell_name(run, cell))
+            band = np.isfinite(half)
+            if band.any():
+                ax.fill_between(
+                    steps, mean - half, mean + half, where=band, color=color, alpha=0.18, lw=0
+                )
+        ax.set_ylabel(ylabel)
+        ax.set_title(title, fontsize=10)
+        _steps_axis(ax)
+        _legend(ax)
+    fig.suptitle(suptitle + _partial_note(run))
+    return fig
+
+
 def fig_gait(run: Run) -> Figure | None:
     """The gait: % of visited training states (left) and of evaluation states (right) with the
     torso upside down, per period and cell, mean and 95% CI over seeds. A run that learned the
@@ -512,29 +537,34 @@ def fig_gait(run: Run) -> Figure | None:
     env_name = run.cfg.get("env_name")
     if run.periods == 0 or "upside_down" not in metrics or env_name != "halfcheetah":
         return None
-    cells = group_cells(run)
-    colors = _cell_colors(cells)
-    steps = env_steps_axis(run)
-    panels = [("upside_down", "visited training states"), ("eval_upside_down", "evaluation")]
-    panels = [(k, t) for k, t in panels if k in metrics]
-    fig, axes = _new_figure(ncols=len(panels))
-    for ax, (name, title) in zip(axes, panels, strict=True):
-        for cell in cells:
-            mean, half = mean_ci95_columns(100.0 * metrics[name][cell.runs])
-            color = colors[cell.cell]
-            ax.plot(steps, mean, color=color, lw=1.5, label=cell_name(run, cell))
-            band = np.isfinite(half)
-            if band.any():
-                ax.fill_between(
-                    steps, mean - half, mean + half, where=band, color=color, alpha=0.18, lw=0
-                )
+    ylabel = "% of states upside down (|pitch| > 90°)"
+    panels = [
+        (name, f"Gait: {title}", ylabel, 100.0)
+        for name, title in (
+            ("upside_down", "visited training states"),
+            ("eval_upside_down", "evaluation"),
+        )
+        if name in metrics
+    ]
+    fig = _cell_bands(run, panels, "Upside-down (flipped) gait, mean and 95% CI over seeds")
+    for ax in fig.axes:
         ax.set_ylim(-3, 103)
-        ax.set_ylabel("% of states upside down (|pitch| > 90°)")
-        ax.set_title(f"Gait: {title}", fontsize=10)
-        _steps_axis(ax)
-        _legend(ax)
-    fig.suptitle("Upside-down (flipped) gait, mean and 95% CI over seeds" + _partial_note(run))
     return fig
+
+
+def fig_falls(run: Run) -> Figure | None:
+    """Health on a task where a fall ends the episode: % of the training episodes finished in each
+    period that ended by a fall (left), their mean length (middle), and % of the evaluation
+    episodes that fell (right), per cell, mean and 95% CI over seeds. Runs with a fall only
+    (`summary.has_falls`)."""
+    if run.periods == 0 or not has_falls(run):
+        return None
+    panels = [
+        ("fell", "Training episodes that fell", "% of finished episodes", 100.0),
+        ("episode_length", "Training episode length", "mean length (env steps)", 1.0),
+        ("eval_fell", "Evaluation episodes that fell", "% of evaluation episodes", 100.0),
+    ]
+    return _cell_bands(run, panels, "Falls and episode length, mean and 95% CI over seeds")
 
 
 FIGURES: dict[str, Callable[[Run], Figure | None]] = {
@@ -545,6 +575,7 @@ FIGURES: dict[str, Callable[[Run], Figure | None]] = {
     "fig8_states": fig8_states,
     "fig9_budget": fig9_budget,
     "gait": fig_gait,
+    "falls": fig_falls,
 }
 """File stem -> figure function, in paper order."""
 

@@ -42,12 +42,46 @@ STAT_COLUMNS: tuple[str, ...] = (
     "upside_down_late_mean",
     "upside_down_late_ci95",
     "upside_down_source",
+    "fell_late_mean",
+    "fell_late_ci95",
+    "episode_length_late_mean",
+    "episode_length_late_ci95",
     "expert_return",
     "env_steps_per_second",
     "periods",
     "env_steps",
 )
 """Columns of a summary row after ``cell``, ``cell_label`` and the swept fields."""
+
+
+def episodes_late(run: RunDir) -> tuple[np.ndarray, np.ndarray]:
+    """[R] the share of training episodes that ended by a fall (a termination), and their mean
+    length in env steps, over the episodes that finished in the last 30% of the periods present
+    (`gait.LATE_FRACTION`), each period weighted by its episode count. nan where none finished, or
+    for runs recorded before episodes could end early (no `fell` metric)."""
+    metrics = run.metrics
+    num_runs, periods = metrics["eval_return"].shape[:2]
+    if periods == 0 or "fell" not in metrics:
+        return np.full(num_runs, np.nan), np.full(num_runs, np.nan)
+    late = max(1, math.ceil(gait.LATE_FRACTION * periods))
+    count = np.asarray(metrics["episodes"], np.float64)[:, -late:]
+    total = count.sum(axis=1)
+
+    def weighted(name: str) -> np.ndarray:
+        values = np.nan_to_num(np.asarray(metrics[name], np.float64)[:, -late:])
+        return np.where(total > 0, (values * count).sum(axis=1) / np.maximum(total, 1), np.nan)
+
+    return weighted("fell"), weighted("episode_length")
+
+
+def has_falls(run: RunDir) -> bool:
+    """Whether any training or evaluation episode of the run ended by a fall: the runs whose tables,
+    readings and figures show the fall share and the episode length (never HalfCheetah's)."""
+    m = run.metrics
+    return any(
+        name in m and np.nanmax(np.asarray(m[name]), initial=0.0) > 0
+        for name in ("fell", "eval_fell")
+    )
 
 
 def upside_down_late(run: RunDir) -> tuple[np.ndarray, str]:
@@ -94,6 +128,7 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
     auc = area_under_curve(eval_return, steps)
     demos = metrics.get("demos_used")
     flipped, flipped_source = upside_down_late(run)
+    fell, lengths = episodes_late(run)
     expert = expert_return(run)
     sps = float(run.timing.get("env_steps_per_second", math.nan))
     periods = run.periods
@@ -117,6 +152,8 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
         row["demos_used_mean"], row["demos_used_ci95"] = mean_ci95(final_demos)
         row["upside_down_late_mean"], row["upside_down_late_ci95"] = mean_ci95(flipped[idx])
         row["upside_down_source"] = flipped_source
+        row["fell_late_mean"], row["fell_late_ci95"] = mean_ci95(fell[idx])
+        row["episode_length_late_mean"], row["episode_length_late_ci95"] = mean_ci95(lengths[idx])
         row["expert_return"] = expert
         row["env_steps_per_second"] = sps
         row["periods"] = int(periods)
@@ -163,6 +200,7 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
     """The Markdown summary: a header stating what the numbers are, then one table row per cell."""
     config = run.config
     cfg = config.get("config", {})
+    falls = has_falls(run)
     total = int(cfg.get("total_env_steps") or 0)
     last = rows[0]["env_steps"] if rows else 0
     seeds = config.get("seeds", [])
@@ -202,6 +240,12 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
         "training states with the torso upside down (|pitch| > 90°) in the last 30% of the "
         "periods present (the flipped gait; HalfCheetah only)."
         + (
+            " Fell: % of the training episodes finished in the last 30% of the periods that "
+            "ended by a fall (the task's termination), and their mean length in env steps."
+            if falls
+            else ""
+        )
+        + (
             " Here from the saved sample of visited states (recorded before the per-period "
             "metric existed)."
             if rows and rows[0]["upside_down_source"] == "sample"
@@ -221,6 +265,7 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
         "AUC (mean return)",
         "demos used",
         "upside down (last 30%)",
+        *(["fell (last 30%)", "episode length (last 30%)"] if falls else []),
     ]
     lines.append("| " + " | ".join(columns) + " |")
     text_columns = {"label"} | {f for f in fields if any(isinstance(row[f], str) for row in rows)}
@@ -235,6 +280,11 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
             format_mean_ci(row["demos_used_mean"], row["demos_used_ci95"]),
             _format_percent(row["upside_down_late_mean"], row["upside_down_late_ci95"]),
         ]
+        if falls:
+            values += [
+                _format_percent(row["fell_late_mean"], row["fell_late_ci95"]),
+                format_mean_ci(row["episode_length_late_mean"], row["episode_length_late_ci95"]),
+            ]
         lines.append("| " + " | ".join(values) + " |")
     return "\n".join(lines) + "\n"
 

@@ -419,6 +419,42 @@ def test_gait_figure_draws_percent_upside_down_per_cell(tmp_path: Path) -> None:
     np.testing.assert_allclose(_lines(visited)["BQSAC b=0.2"][1], 10.0 * np.arange(PERIODS) + 4.0)
 
 
+def _with_falls(path: Path) -> dict[str, np.ndarray]:
+    """Give a run directory the episode metrics of a task that terminates: run r in period p
+    finished 2 + r episodes, a share (p + r) / 20 of them by a fall, of mean length 100 + 10 p;
+    period 0 of run 0 finished none (nan)."""
+    metrics = dict(np.load(path / "metrics.npz"))
+    n = metrics["eval_return"].shape[0]
+    p, r = np.arange(PERIODS)[None, :], np.arange(n)[:, None]
+    metrics["episodes"] = np.broadcast_to(2 + r, (n, PERIODS)).astype(np.int32).copy()
+    metrics["fell"] = (p + r) / 20.0
+    metrics["episode_length"] = np.broadcast_to(100.0 + 10 * p, (n, PERIODS)).copy()
+    metrics["eval_fell"] = np.zeros((n, PERIODS))
+    metrics["episodes"][0, 0] = 0
+    metrics["fell"][0, 0] = metrics["episode_length"][0, 0] = np.nan
+    np.savez(path / "metrics.npz", **metrics)
+    return metrics
+
+
+def test_falls_figure_draws_the_fall_share_and_episode_length_per_cell(tmp_path: Path) -> None:
+    path = write_run_dir(tmp_path / "f", NONE_AND_BERNOULLI, NONE_AND_BERNOULLI_SWEEP)
+    assert plots.fig_falls(rundir.load_run(path)) is None  # no episode ever fell
+    metrics = _with_falls(path)
+    _, cells = _files(path)
+    fig = _make(plots.fig_falls(rundir.load_run(path)))
+    fell, length, evaluation = fig.axes
+    assert fell.get_title() == "Training episodes that fell"
+    # SAC = runs 0, 1, 2; at period 0 run 0 has no episode: the mean of runs 1, 2 = (1 + 2) / 20.
+    x, y = _lines(fell)["SAC"]
+    np.testing.assert_array_equal(x, [1000, 2000, 3000, 4000])
+    np.testing.assert_allclose(y[0], 100 * 3 / 40)
+    np.testing.assert_allclose(y[1:], 100 * (np.arange(1, PERIODS) + 1) / 20)
+    np.testing.assert_allclose(_lines(length)["BQSAC b=0.2"][1], 100.0 + 10 * np.arange(PERIODS))
+    np.testing.assert_allclose(
+        _lines(evaluation)["SAC"][1], 100 * _seed_mean(metrics["eval_fell"], cells[0])
+    )
+
+
 # ---------------------------------------------------------------- plot_all: which files
 
 
@@ -442,5 +478,5 @@ def test_plot_all_without_active_cells_skips_fig7(tmp_path: Path) -> None:
 
 def test_plot_all_of_a_full_sweep_writes_every_figure_but_the_gait(full_dir: Path) -> None:
     paths = {p.stem: p for p in plots.plot_all(full_dir)}
-    assert set(paths) == set(plots.FIGURES) - {"gait"}  # the toy env has no gait
+    assert set(paths) == set(plots.FIGURES) - {"gait", "falls"}  # the toy env: no gait, no fall
     assert all(_png_ok(p) for p in paths.values())

@@ -239,6 +239,10 @@ def test_write_summary_csv_schema_and_markdown(run_dir: Path) -> None:
         "upside_down_late_mean",
         "upside_down_late_ci95",
         "upside_down_source",
+        "fell_late_mean",
+        "fell_late_ci95",
+        "episode_length_late_mean",
+        "episode_length_late_ci95",
         "expert_return",
         "env_steps_per_second",
         "periods",
@@ -329,6 +333,41 @@ def test_upside_down_late_from_period_metric(tmp_path: Path) -> None:
     (path / "config.json").write_text(json.dumps(cfg))
     assert (path / "figures" / "gait.png") in plots.plot_all(path)
     assert "upside down (last 30%)" in (summary.write_summary(path)[1]).read_text()
+
+
+def test_fall_share_and_episode_length_weigh_each_late_period_by_its_episodes(
+    tmp_path: Path,
+) -> None:
+    """10 periods, the last 3 late. Run 0 finished (1, 3, 0) episodes in them, falling in shares
+    (1, 1/3, nan) with mean lengths (50, 90, nan): its late fall share is (1 + 1) / 4 = 0.5 and its
+    mean length (50 + 3 * 90) / 4 = 80. Columns and the reading show them; a run with no fall does
+    not."""
+    path = write_run_dir(
+        tmp_path / "f", NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]}, periods=10,
+        total_periods=10,
+    )  # fmt: skip
+    m = dict(np.load(path / "metrics.npz"))
+    n = m["eval_return"].shape[0]
+    m["episodes"] = np.ones((n, 10), np.int32)
+    m["fell"] = np.zeros((n, 10))
+    m["episode_length"] = np.full((n, 10), 1000.0)
+    m["eval_fell"] = np.zeros((n, 10))
+    np.savez(path / "metrics.npz", **m)
+    assert not summary.has_falls(rundir.load_run(path))
+    assert "fell (last 30%)" not in summary.write_summary(path)[1].read_text()
+    m["episodes"][0, 7:] = (1, 3, 0)
+    m["fell"][0, 7:] = (1.0, 1 / 3, np.nan)
+    m["episode_length"][0, 7:] = (50.0, 90.0, np.nan)
+    np.savez(path / "metrics.npz", **m)
+    run = rundir.load_run(path)
+    fell, length = summary.episodes_late(run)
+    np.testing.assert_allclose((fell[0], length[0]), (0.5, 80.0))
+    np.testing.assert_allclose((fell[1:], length[1:]), (0.0 * fell[1:], 1000.0 + 0 * fell[1:]))
+    assert (
+        "| fell (last 30%) | episode length (last 30%) |"
+        in summary.write_summary(path)[1].read_text()
+    )
+    assert "Falls (share of the late training episodes" in compare.plain_reading(path)
 
 
 def test_upside_down_late_from_visited_sample_for_old_halfcheetah_runs(tmp_path: Path) -> None:
