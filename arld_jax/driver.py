@@ -154,6 +154,7 @@ def run_sweep(
         options=ocp.CheckpointManagerOptions(max_to_keep=2, create=True),
     )
     t0 = time.time()
+    log(config_mod.physics_line(cfg, config_mod.jax_platform()))
     state = init(keys, hps)
     metrics: dict[str, np.ndarray] = {}
     done = 0

@@ -218,8 +218,9 @@ def _cpu_arld_config() -> Config:
     steps, 8k env steps per run, one deterministic evaluation episode every 1,000 steps (HalfCheetah's
     deterministic returns vary little across initial states; evaluation costs as much as training
     env steps here), budget 1,500 demonstrated steps, N_r = 1,000, b = 0.1, t_query = 0.1 (the
-    paper's best values), C = 5."""
+    paper's best values), C = 5. MJX, not 'auto': the committed run (experiments/arld_cpu) used it."""
     return Config(
+        backend="mjx",
         num_envs=2,
         updates_per_env_step=0.5,
         learning_starts=1_000,
@@ -245,7 +246,9 @@ def _default_config() -> Config:
     the run); budget 4,000 demonstrated steps = 20% of the run and b = t_query = 0.2 (the paper
     spends 10,000 of 400k, 2.5%, with b = t_query = 0.1; a 20k-step run needs a larger share for
     the effect to show: at 10% the querying cells were not above SAC, experiments/README.md),
-    N_r 1,000, C = 1 (as the `arld` preset)."""
+    N_r 1,000, C = 1 (as the `arld` preset). Physics 'auto' (the C engine on a CPU): this is the
+    newcomer's first run; the committed one used MJX (its command in experiments/README.md says
+    `--backend mjx`)."""
     return Config(
         total_env_steps=20_000,
         replay_capacity=20_000,
@@ -262,7 +265,7 @@ def _default_config() -> Config:
 
 def preset_default() -> Sweep:
     """The main job: SAC, GQSAC, BQSAC and AQSAC (intrinsic sigma_theta), 3 seeds each, 20k env
-    steps of MJX HalfCheetah at 1 env per run, budget 4,000 demonstrated steps from the shipped
+    steps of HalfCheetah at 1 env per run, budget 4,000 demonstrated steps from the shipped
     expert (12 runs in one compiled program; its wall time is in experiments/README.md).
 
     What to expect: plain SAC is still early on its learning curve at 20k steps (around 0-250);
@@ -309,8 +312,11 @@ def _arld_100k_config() -> Config:
     (10,000 x 100k / 400k = 2,500), everything else as the paper; 5 deterministic evaluation
     episodes. Plain SAC is still below the expert at 100k (4,236 against 6,431: experiments/
     expert/), so demonstrations have room to matter. b = 0.1 for both uncertainty measures (the paper's best b
-    for Noisy SAC was 0.4; one b keeps BQSAC and BQNoisySAC spending alike)."""
-    return Config(replay_capacity=100_000, budget=2_500, expert_path=SHIPPED_EXPERT_PATH)
+    for Noisy SAC was 0.4; one b keeps BQSAC and BQNoisySAC spending alike). MJX, not 'auto':
+    the committed runs (experiments/arld_100k, fig1_100k) used it and resume by their commands."""
+    return Config(
+        backend="mjx", replay_capacity=100_000, budget=2_500, expert_path=SHIPPED_EXPERT_PATH
+    )
 
 
 def preset_arld() -> Sweep:

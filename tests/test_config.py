@@ -59,6 +59,38 @@ def test_invalid_value_raises_naming_the_field(field: str, overrides: dict[str, 
     assert "allowed" in str(err.value)
 
 
+def test_bad_backend_names_the_field_and_every_allowed_value() -> None:
+    with pytest.raises(ValueError) as err:
+        config.Config(backend="gpu")
+    assert str(err.value) == (
+        "Config.backend = 'gpu' is invalid: allowed one of 'auto', 'mjx', 'mujoco', "
+        "'generalized', 'positional', 'spring'."
+    )
+
+
+@pytest.mark.parametrize(
+    ("platform", "physics"), [("cpu", "mujoco"), ("gpu", "mjx"), ("tpu", "mjx")]
+)
+def test_auto_backend_is_resolved_when_the_config_is_built(monkeypatch, platform, physics) -> None:
+    """'auto' becomes the machine's fastest physics at construction (the C engine when jax computes
+    on the CPU, MJX on an accelerator), so config.json records what ran; explicit choices stay."""
+    monkeypatch.setattr(config, "jax_platform", lambda: platform)
+    assert config.auto_backend(platform) == physics
+    cfg = config.Config()
+    assert cfg.backend == physics and config.Config(backend="auto").backend == physics
+    assert dataclasses.asdict(cfg)["backend"] == physics
+    assert cfg.replace(budget=7).backend == physics
+    for chosen in ("mjx", "mujoco"):
+        assert config.Config(backend=chosen).backend == chosen
+        assert cfg.replace(backend=chosen).backend == chosen
+    line = config.physics_line(cfg, platform)
+    assert line.startswith(f"physics: {physics} (") and f"--backend auto on {platform}" in line
+    other = "mjx" if physics == "mujoco" else "mujoco"
+    line = config.physics_line(cfg.replace(backend=other), platform)
+    assert f"auto would take {physics} on {platform}" in line
+    assert "does not apply" in config.physics_line(config.tiny(), platform)
+
+
 def test_replace_validates_again() -> None:
     cfg = config.tiny()
     with pytest.raises(ValueError, match=r"Config\.budget"):
