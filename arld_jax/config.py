@@ -20,6 +20,7 @@ import dataclasses
 import inspect
 import math
 import textwrap
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -56,6 +57,36 @@ def paper_name(strategy: str, agent: str = "sac", uncertainty: str = "intrinsic"
     """The paper's name of a cell's agent: SAC, GQSAC, BQSAC, AQSAC, AQNoisySAC (section 4), and
     likewise AQTD3, BQNoisyTD3, GQBootTD3 for the Fig. 1 families."""
     return STRATEGY_PREFIX[strategy] + REGISTRY[agent].variant(uncertainty)
+
+
+SHORT_NAMES: dict[str, str] = {"demo_steps": "C", "query_prob": "b"}
+"""A swept field's name in a cell's name, where the paper has a shorter one."""
+
+
+def cell_name(
+    values: Mapping[str, Any], swept: Iterable[str], agent: str = "sac", exclude: Iterable[str] = ()
+) -> str:
+    """A cell in the paper's names, as figures and progress lines show it: its agent
+    (`paper_name`), b for a Bernoulli cell, t_query for an active one, then every other swept
+    field its strategy uses (`SWEEPABLES`): "SAC", "BQSAC b=0.2", "AQNoisyTD3 t_query=0.1 C=2".
+    `values`: the cell's fields (strategy, uncertainty, b, t_query and the swept ones);
+    `exclude`: fields not to show (a panel that fixes them)."""
+    strategy, exclude = values["strategy"], set(exclude)
+    shown = {"bernoulli": "query_prob", "active": "t_query"}.get(strategy)
+    names = [shown] if shown and shown not in exclude else []
+    skip = {"strategy", "uncertainty", "query_prob", "t_query", *exclude}
+    names += [n for n in swept if n not in skip and n in SWEEPABLES and _uses(strategy, n)]
+    parts = [paper_name(strategy, agent, values.get("uncertainty") or "intrinsic")]
+    for name in names:
+        value = values[name]
+        text = f"{value:g}" if isinstance(value, float) else str(value)
+        parts.append(f"{SHORT_NAMES.get(name, name)}={text}")
+    return " ".join(parts)
+
+
+def _uses(strategy: str, name: str) -> bool:
+    """Whether runs of `strategy` use the sweepable field `name` (the pruning rule)."""
+    return strategy in (SWEEPABLES[name].strategies or STRATEGIES)
 
 
 def jax_platform() -> str:
@@ -263,6 +294,12 @@ class Config(*AGENT_OPTIONS):
     @property
     def warmup_iters(self) -> int:
         return math.ceil(self.learning_starts / self.num_envs)
+
+    @property
+    def warmup_periods(self) -> int:
+        """Evaluation periods holding a warm-up iteration: with fewer (or no) gradient updates they
+        run several times faster than the rest, so a time per period is measured apart for them."""
+        return math.ceil(self.warmup_iters / self.iters_per_eval)
 
     @property
     def updates_per_iter(self) -> int:

@@ -25,7 +25,8 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import EngFormatter
 
 from arld_jax.agents import REGISTRY
-from arld_jax.config import UNCERTAINTIES, paper_name
+from arld_jax.config import SHORT_NAMES, UNCERTAINTIES
+from arld_jax.config import cell_name as config_cell_name
 from arld_jax.rundir import (
     Cell,
     RunDir,
@@ -42,7 +43,6 @@ DPI = 110
 SMOOTH_WINDOW = 5
 """Moving-average window of Fig. 3, in trace points."""
 
-_SHORT = {"demo_steps": "C", "query_prob": "b", "t_query": "t_query"}
 _LINESTYLES = ("-", "--", ":", "-.")
 
 Run = RunDir
@@ -114,27 +114,15 @@ def uncertainty_title(run: Run, uncertainty: str | None, default: str) -> str:
 
 
 def cell_name(run: Run, cell: Cell, exclude: Sequence[str] = ()) -> str:
-    """Short legend label in the paper's names, e.g. "AQSAC t_query=0.1", "BQNoisySAC b=0.4 C=2".
-
-    Built from the swept fields (every one but seed appears), so it carries the same information
-    as the cell_label; ``exclude`` drops fields a panel already fixes.
-    """
-    strategy = _field(run, cell, "strategy")
-    uncertainty = _field(run, cell, "uncertainty")
-    if strategy is None:
+    """Short legend label in the paper's names, e.g. "AQSAC t_query=0.1", "BQNoisySAC b=0.4 C=2"
+    (`config.cell_name`: every swept field the cell's strategy uses, so it tells the cells apart as
+    the cell_label does); ``exclude`` drops fields a panel already fixes."""
+    if _field(run, cell, "strategy") is None:
         return cell.cell_label or f"cell {cell.cell}"
-    parts = [paper_name(strategy, run.agent, uncertainty or "intrinsic")]
-    if strategy == "bernoulli" and "query_prob" not in exclude:
-        parts.append(f"b={_field(run, cell, 'query_prob'):g}")
-    if strategy == "active" and "t_query" not in exclude:
-        parts.append(f"t_query={_field(run, cell, 't_query'):g}")
-    skip = {"strategy", "uncertainty", "query_prob", "t_query", *exclude}
-    for name in swept_fields(run):
-        if name not in skip:
-            value = _field(run, cell, name)
-            text = f"{value:g}" if isinstance(value, float) else str(value)
-            parts.append(f"{_SHORT.get(name, name)}={text}")
-    return " ".join(parts) or cell.cell_label
+    swept = swept_fields(run)
+    names = {"strategy", "uncertainty", "query_prob", "t_query", *swept}
+    values = {name: _field(run, cell, name) for name in names}
+    return config_cell_name(values, swept, run.agent, exclude)
 
 
 def _colors(n: int) -> list[Any]:
@@ -348,7 +336,7 @@ def _fig_parameter(run: Run, strategy: str, param: str, label: str, number: int)
                 color=value_colors[value],
                 ls=style,
                 lw=1.4,
-                label=f"{_SHORT.get(param, param)}={value:g}{suffix}",
+                label=f"{SHORT_NAMES.get(param, param)}={value:g}{suffix}",
             )
             final_mean, final_half = mean_ci95(metrics["eval_return"][cell.runs, -1])
             xs.append(value)
