@@ -472,7 +472,9 @@ def write_group_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
     if plots:
         from arld_jax import plots as plots_mod
 
-        log(f"figure: {plots_mod.plot_group(out)}")
+        path = plots_mod.plot_group(out)
+        if path is not None:
+            log(f"figure: {path}")
 
 
 def evaluate_expert(
