@@ -91,6 +91,8 @@ def _mean(xs: list[float]) -> float | None:
 def format_eta(seconds: float | None) -> str:
     if seconds is None:
         return "ETA after the first learning period"
+    if seconds < 60:
+        return f"ETA {seconds:.0f} s"
     return f"ETA {seconds / 60:.1f} min" if seconds < 5400 else f"ETA {seconds / 3600:.1f} h"
 
 

@@ -254,7 +254,7 @@ def test_a_line_per_period_and_the_same_numbers_whatever_the_chunk(uninterrupted
     tails = [line.split(" | ")[5:] for line in progress]
     assert tails == [[], ["checkpoint 1/2"], [], ["checkpoint 2/2"]]
     assert "ETA after the first learning period" in progress[0]
-    assert progress[1].split(" | ")[3].startswith("ETA ") and "ETA 0.0 min" in progress[3]
+    assert progress[1].split(" | ")[3].startswith("ETA ") and "ETA 0 s" in progress[3]
     a, b = np.load(full / rundir.METRICS_FILE), np.load(tmp_path / rundir.METRICS_FILE)
     for name in a.files:
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
@@ -278,7 +278,8 @@ def test_eta_counts_warm_up_and_learning_periods_apart():
     assert driver.eta_seconds(4, 2, 10, None, 20.0) == 6 * 20.0
     assert driver.eta_seconds(0, 0, 5, None, 20.0) == 100.0
     assert driver.format_eta(None) == "ETA after the first learning period"
-    assert driver.format_eta(90.0) == "ETA 1.5 min" and driver.format_eta(7200.0) == "ETA 2.0 h"
+    assert driver.format_eta(12.4) == "ETA 12 s" and driver.format_eta(90.0) == "ETA 1.5 min"
+    assert driver.format_eta(7200.0) == "ETA 2.0 h"
 
 
 def test_latest_returns_name_each_cell_with_its_seed_mean():
