@@ -230,7 +230,7 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
         "--chunk_periods",
         type=int,
         default=None,
-        help="evaluation periods per compiled chunk (checkpoint after each); default: ~10 chunks",
+        help="evaluation periods per chunk (a checkpoint after each); default: ~10 chunks",
     )
     parser.add_argument(
         "--stop_after_chunks",

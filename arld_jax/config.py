@@ -20,10 +20,12 @@ import dataclasses
 import inspect
 import math
 import textwrap
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import flax.struct
+import jax
 import jax.numpy as jnp
 
 from arld_jax import checks
@@ -57,8 +59,71 @@ def paper_name(strategy: str, agent: str = "sac", uncertainty: str = "intrinsic"
     return STRATEGY_PREFIX[strategy] + REGISTRY[agent].variant(uncertainty)
 
 
+SHORT_NAMES: dict[str, str] = {"demo_steps": "C", "query_prob": "b"}
+"""A swept field's name in a cell's name, where the paper has a shorter one."""
+
+
+def cell_name(
+    values: Mapping[str, Any], swept: Iterable[str], agent: str = "sac", exclude: Iterable[str] = ()
+) -> str:
+    """A cell in the paper's names, as figures and progress lines show it: its agent
+    (`paper_name`), b for a Bernoulli cell, t_query for an active one, then every other swept
+    field its strategy uses (`SWEEPABLES`): "SAC", "BQSAC b=0.2", "AQNoisyTD3 t_query=0.1 C=2".
+    `values`: the cell's fields (strategy, uncertainty, b, t_query and the swept ones);
+    `exclude`: fields not to show (a panel that fixes them)."""
+    strategy, exclude = values["strategy"], set(exclude)
+    shown = {"bernoulli": "query_prob", "active": "t_query"}.get(strategy)
+    names = [shown] if shown and shown not in exclude else []
+    skip = {"strategy", "uncertainty", "query_prob", "t_query", *exclude}
+    names += [n for n in swept if n not in skip and n in SWEEPABLES and _uses(strategy, n)]
+    parts = [paper_name(strategy, agent, values.get("uncertainty") or "intrinsic")]
+    for name in names:
+        value = values[name]
+        text = f"{value:g}" if isinstance(value, float) else str(value)
+        parts.append(f"{SHORT_NAMES.get(name, name)}={text}")
+    return " ".join(parts)
+
+
+def _uses(strategy: str, name: str) -> bool:
+    """Whether runs of `strategy` use the sweepable field `name` (the pruning rule)."""
+    return strategy in (SWEEPABLES[name].strategies or STRATEGIES)
+
+
+def jax_platform() -> str:
+    """The platform jax computes on by default: 'cpu', 'gpu' or 'tpu'."""
+    return jax.default_backend()
+
+
+def auto_backend(platform: str) -> str:
+    """The physics `backend='auto'` takes on `platform`: MuJoCo's C engine on the CPU, where its
+    step costs a small fraction of MJX's; MJX on an accelerator, where the C engine would pay a
+    device-host round trip per step and MJX steps the envs on the device."""
+    return "mujoco" if platform == "cpu" else "mjx"
+
+
+def physics_line(cfg: Config, platform: str) -> str:
+    """One line saying which physics `cfg` runs and how it relates to 'auto' on `platform`."""
+    if cfg.env_name != "halfcheetah":
+        return f"physics: none ({cfg.env_name} is pure JAX; --backend does not apply)"
+    auto = auto_backend(platform)
+    how = (
+        f"--backend auto on {platform}"
+        if cfg.backend == auto
+        else f"chosen by --backend or the preset; auto would take {auto} on {platform}"
+    )
+    return f"physics: {cfg.backend} ({PHYSICS[cfg.backend]}; {how})"
+
+
 ENVS: tuple[str, ...] = ("halfcheetah", "toy", "toy_fall")
-BACKENDS: tuple[str, ...] = ("mjx", "mujoco", "generalized", "positional", "spring")
+PHYSICS: dict[str, str] = {
+    "mjx": "MuJoCo-MJX through Brax",
+    "mujoco": "MuJoCo's C engine",
+    "generalized": "Brax's generalized pipeline",
+    "positional": "Brax's positional pipeline",
+    "spring": "Brax's spring pipeline",
+}
+"""Each physics of `Config.backend`, in words (the line a run starts with)."""
+BACKENDS: tuple[str, ...] = ("auto", *PHYSICS)
 REDUCTIONS: tuple[str, ...] = ("mean", "max", "sum")
 WINDOW_RECORDS: tuple[str, ...] = ("all", "agent")
 MATMUL_DTYPES: tuple[str, ...] = ("float32", "bfloat16")
@@ -75,11 +140,14 @@ class Config(*AGENT_OPTIONS):
     env_name: str = "halfcheetah"
     """'halfcheetah' (Brax, MuJoCo physics), or the cheap pure-JAX stand-ins of the tests: 'toy' (never
     ends early) and 'toy_fall' (an episode ends when the action strays far from the target)."""
-    backend: str = "mjx"
-    """Physics of halfcheetah: 'mjx' (MuJoCo-MJX through Brax, the default), 'mujoco' (MuJoCo's C
-    engine on the host through `jax.pure_callback`: Brax's same model, options, observation and
-    reward, a step many times cheaper than MJX's on CPU, for CPU runs; `envs.mujoco_halfcheetah`)
-    or one of Brax's own pipelines."""
+    backend: str = "auto"
+    """Physics of halfcheetah. 'auto' (the default) takes the fastest for the machine when the
+    Config is built, so config.json names the physics that ran: 'mujoco' when jax computes on the
+    CPU, 'mjx' on an accelerator. 'mjx': MuJoCo-MJX through Brax, stepped on the device. 'mujoco':
+    MuJoCo's C engine on the host through `jax.pure_callback`, Brax's same model, options,
+    observation and reward, a step many times cheaper than MJX's on CPU
+    (`envs.mujoco_halfcheetah`). Or one of Brax's own pipelines ('generalized', 'positional',
+    'spring'). The toy envs ignore it."""
     num_envs: int = 1
     """Environments stepped in parallel per run (vmapped). The paper uses one."""
     env_max_batch: int = 0
@@ -205,6 +273,8 @@ class Config(*AGENT_OPTIONS):
     """Free-form labels carried into results (not used by the trainer)."""
 
     def __post_init__(self) -> None:
+        if self.backend == "auto":  # resolved here, so every record of the run names its physics
+            object.__setattr__(self, "backend", auto_backend(jax_platform()))
         validate(self)
 
     # ---- derived values ----
@@ -224,6 +294,12 @@ class Config(*AGENT_OPTIONS):
     @property
     def warmup_iters(self) -> int:
         return math.ceil(self.learning_starts / self.num_envs)
+
+    @property
+    def warmup_periods(self) -> int:
+        """Evaluation periods holding a warm-up iteration: with fewer (or no) gradient updates they
+        run several times faster than the rest, so a time per period is measured apart for them."""
+        return math.ceil(self.warmup_iters / self.iters_per_eval)
 
     @property
     def updates_per_iter(self) -> int:
@@ -451,14 +527,19 @@ def tiny(**overrides: Any) -> Config:
 
 
 def halfcheetah(**overrides: Any) -> Config:
-    """Plain SAC on MJX HalfCheetah, paper network and hyperparameters, 100k env steps."""
-    base: dict[str, Any] = dict(replay_capacity=100_000)
+    """Plain SAC on MJX HalfCheetah, paper network and hyperparameters, 100k env steps.
+
+    MJX, not 'auto': the `sac` preset's and the shipped expert's committed runs (experiments/
+    sac_100k, sac_ablation, expert/training) used it, and their commands must reproduce them."""
+    base: dict[str, Any] = dict(replay_capacity=100_000, backend="mjx")
     base.update(overrides)
     return Config(**base)
 
 
 def paper(**overrides: Any) -> Config:
-    """The paper's protocol (appendix A.1): 400k steps, 1 env, budget 10k, N_r 5k, eval every 5k."""
+    """The paper's protocol (appendix A.1): 400k steps, 1 env, budget 10k, N_r 5k, eval every 5k.
+
+    Physics 'auto': MJX on the accelerator a run of this length wants, the C engine on a CPU."""
     base: dict[str, Any] = dict(
         total_env_steps=400_000, replay_capacity=400_000, num_eval_episodes=10
     )  # budget 10k, N_r 5k, eval every 5k and 1 env are the defaults

@@ -1,8 +1,9 @@
-"""The resumable driver: trains sweeps chunk by chunk with checkpoints, exports experts.
+"""The resumable driver: trains sweeps period by period with checkpoints, exports experts.
 
-`run_sweep` is the one place that compiles and runs a sweep (one program: `compile.jit_chunk`), saving
-after every chunk in the format of `arld_jax.rundir`; rerunning the same sweep into the same
-directory resumes and ends with results identical to an uninterrupted run. `run_group` runs the
+`run_sweep` is the one place that compiles and runs a sweep (one program of one evaluation period:
+`compile.jit_chunk`), printing a progress line after every period and saving after every chunk
+of periods in the format of `arld_jax.rundir`; rerunning the same sweep into the same directory
+resumes and ends with results identical to an uninterrupted run. `run_group` runs the
 members of a `SweepGroup` (one program per agent family) one after another. The command line is
 `arld_jax.run`.
 """
@@ -47,7 +48,7 @@ from arld_jax.sweep import REPO_ROOT, SHIPPED_EXPERT, Sweep, SweepGroup, resolve
 class RunOptions:
     """How to drive a sweep (none of it changes what is computed)."""
 
-    chunk_periods: int | None = None  # evaluation periods per compiled chunk (None: ~10 chunks)
+    chunk_periods: int | None = None  # evaluation periods per checkpoint (None: ~10 checkpoints)
     stop_after_chunks: int | None = None  # stop early (to test resuming)
     command: str = ""  # recorded in config.json
     preset: str = ""
@@ -62,6 +63,61 @@ def enable_compilation_cache() -> None:
     cache = os.environ.get("ARLD_JAX_CACHE", str(REPO_ROOT / ".jax_cache"))
     jax.config.update("jax_compilation_cache_dir", cache)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+
+
+MAX_CELLS_SHOWN = 10
+"""A progress line names at most this many cells (the best ones when a sweep has more)."""
+
+
+def eta_seconds(
+    done: int, warm: int, total: int, t_warm: float | None, t_learn: float | None
+) -> float | None:
+    """Seconds left of a run of `total` evaluation periods with `done` done, the first `warm` of
+    them warm-up periods (`Config.warmup_periods`): the warm-up periods left at `t_warm` seconds
+    each, the learning periods left at `t_learn` each (mean times measured on periods of that kind;
+    None: none timed yet). None while a kind still to run has no time: warm-up periods do few or no
+    gradient updates and run several times faster, so an ETA from them alone would be far short."""
+    warm_left = max(warm - done, 0)
+    learn_left = total - max(done, warm)
+    if (warm_left and t_warm is None) or (learn_left and t_learn is None):
+        return None
+    return warm_left * (t_warm or 0.0) + learn_left * (t_learn or 0.0)
+
+
+def _mean(xs: list[float]) -> float | None:
+    return sum(xs) / len(xs) if xs else None
+
+
+def format_eta(seconds: float | None) -> str:
+    if seconds is None:
+        return "ETA after the first learning period"
+    if seconds < 60:
+        return f"ETA {seconds:.0f} s"
+    return f"ETA {seconds / 60:.1f} min" if seconds < 5400 else f"ETA {seconds / 3600:.1f} h"
+
+
+def latest_returns(names: list[str], eval_return: np.ndarray) -> str:
+    """ "SAC 12, AQSAC 340": each cell's latest evaluation return, the mean over its seeds
+    (`eval_return` [runs], cell-major with as many seeds per cell), in cell order; the
+    `MAX_CELLS_SHOWN` best with more cells than that."""
+    per_cell = np.nanmean(np.asarray(eval_return, np.float64).reshape(len(names), -1), axis=1)
+    order = range(len(names))
+    if len(names) > MAX_CELLS_SHOWN:
+        order = sorted(np.argsort(-per_cell, kind="stable")[:MAX_CELLS_SHOWN])
+    text = ", ".join(f"{names[i]} {per_cell[i]:,.0f}" for i in order)
+    if len(names) > MAX_CELLS_SHOWN:
+        text += f" (the best {MAX_CELLS_SHOWN} of {len(names)} cells)"
+    return text
+
+
+def sweep_cell_names(sweep: Sweep) -> list[str]:
+    """The sweep's cells in the paper's names (`config.cell_name`), in cell order."""
+    configs = sweep.run_configs()[:: len(sweep.seeds)]  # the first run of each cell
+    fields = ("strategy", "uncertainty", "query_prob", "t_query", *sweep.sweep)
+    return [
+        config_mod.cell_name({f: getattr(c, f) for f in fields}, sweep.sweep, c.agent)
+        for c in configs
+    ]
 
 
 def choose_chunk(num_evals: int, requested: int | None) -> int:
@@ -147,13 +203,16 @@ def run_sweep(
     chunk = choose_chunk(cfg.num_evals, options.chunk_periods)
     num_chunks = cfg.num_evals // chunk
     init = jax.jit(over_runs(trainer.init, vmapped), out_shardings=sharding)
-    run_chunk = jit_chunk(trainer, vmapped=vmapped)
+    # One period per call, `chunk` calls per checkpoint: a progress line after every period, and
+    # the same program (so the same numbers) whatever the chunk size.
+    run_period = jit_chunk(trainer, vmapped=vmapped)
 
     mngr = ocp.CheckpointManager(
         (out / CHECKPOINT_DIR).absolute(),
         options=ocp.CheckpointManagerOptions(max_to_keep=2, create=True),
     )
     t0 = time.time()
+    log(config_mod.physics_line(cfg, config_mod.jax_platform()))
     state = init(keys, hps)
     metrics: dict[str, np.ndarray] = {}
     done = 0
@@ -177,47 +236,64 @@ def run_sweep(
     (out / LAYOUT_FILE).write_text(json.dumps(layout) + "\n")  # the layout of what is saved below
     hooks.before_compile(done * chunk * cfg.eval_every)
     compile_start = time.time()
-    compiled = run_chunk.lower(state, hps, jnp.int32(0), chunk).compile()
+    compiled = run_period.lower(state, hps, jnp.int32(0), 1).compile()
     compile_seconds = time.time() - compile_start
     log(
         f"compiled in {compile_seconds:.0f} s; {num_runs} runs x {cfg.total_env_steps:,} env steps, "
-        f"{num_chunks} chunks of {chunk * cfg.eval_every:,} steps, {len(devices)} device(s)"
+        f"{cfg.num_evals} periods of {cfg.eval_every:,} steps ({cfg.warmup_periods} with "
+        f"warm-up), a checkpoint every {chunk} period(s), {len(devices)} device(s)"
     )
 
-    train_seconds = 0.0
+    def save_chunk(c: int, parts: list[Any], state: Any) -> Any:
+        """Append the chunk's periods to metrics.npz, then checkpoint (the order resuming needs)."""
+        m = jax.tree.map(lambda *xs: np.concatenate(xs, axis=1), *parts)
+        for k, v in dataclasses.asdict(m).items():
+            metrics[k] = np.concatenate([metrics[k], v], axis=1) if k in metrics else v
+        save_npz(out / METRICS_FILE, metrics | state_samples(state, num_runs))
+        mngr.save(c + 1, args=ocp.args.StandardSave(to_checkpoint(state)))
+        mngr.wait_until_finished()
+        return m
+
+    names = sweep_cell_names(sweep)
+    timed: dict[bool, list[float]] = {True: [], False: []}  # warm-up period? -> seconds of each
     chunks_this_call = 0
     for c in range(done, num_chunks):
         hooks.before_chunk(c)
-        start = time.time()
-        state, m = compiled(state, hps, jnp.int32(c * chunk))
-        m = jax.tree.map(lambda x: np.asarray(x)[:num_runs], m)
-        train_seconds += time.time() - start
-        for k, v in dataclasses.asdict(m).items():
-            metrics[k] = np.concatenate([metrics[k], v], axis=1) if k in metrics else v
-        samples = state_samples(state, num_runs)
-        save_npz(out / METRICS_FILE, metrics | samples)  # before the checkpoint (see resume)
-        mngr.save(c + 1, args=ocp.args.StandardSave(to_checkpoint(state)))
-        mngr.wait_until_finished()
+        parts = []
+        for p in range(c * chunk, (c + 1) * chunk):
+            start = time.time()
+            state, m = compiled(state, hps, jnp.int32(p))
+            m = jax.tree.map(lambda x: np.asarray(x)[:num_runs], m)  # waits for the period
+            warm = p < cfg.warmup_periods
+            timed[warm].append(time.time() - start)
+            parts.append(m)
+            last = p == (c + 1) * chunk - 1
+            if last:
+                m = save_chunk(c, parts, state)
+            eta = eta_seconds(
+                p + 1, cfg.warmup_periods, cfg.num_evals, _mean(timed[True]), _mean(timed[False])
+            )
+            log(
+                f"period {p + 1}/{cfg.num_evals}{' (warm-up)' if warm else ''} | env steps "
+                f"{(p + 1) * cfg.eval_every:,}/{cfg.total_env_steps:,} per run | "
+                f"{cfg.eval_every * num_runs / max(timed[warm][-1], 1e-9):,.0f} env steps/s "
+                f"(all runs) | {format_eta(eta)} | eval return "
+                + latest_returns(names, parts[-1].eval_return[:, -1])
+                + (f" | checkpoint {c + 1}/{num_chunks}" if last else "")
+            )
         chunks_this_call += 1
-        steps_done = (c + 1) * chunk * cfg.eval_every
-        rate = chunks_this_call * chunk * cfg.eval_every * num_runs / max(train_seconds, 1e-9)
-        eta = (num_chunks - c - 1) * train_seconds / chunks_this_call
-        latest = np.nanmean(m.eval_return[:, -1])
-        log(
-            f"[{c + 1}/{num_chunks}] env steps {steps_done:,}/{cfg.total_env_steps:,} per run | "
-            f"{rate:,.0f} env steps/s (all runs) | ETA {eta / 60:.1f} min | "
-            f"eval return {latest:.1f} (mean of runs)"
-        )
         hooks.after_chunk(c, num_chunks, m)
         if options.stop_after_chunks is not None and chunks_this_call >= options.stop_after_chunks:
             break
+    train_seconds = sum(timed[True]) + sum(timed[False])
+    periods_this_call = len(timed[True]) + len(timed[False])
     complete = metrics and metrics["eval_return"].shape[1] == cfg.num_evals
     timing = {
         "wall_seconds": time.time() - t0,
         "train_seconds": train_seconds,
         "compile_seconds": compile_seconds,
         "env_steps_per_second": (
-            chunks_this_call * chunk * cfg.eval_every * num_runs / train_seconds
+            periods_this_call * cfg.eval_every * num_runs / train_seconds
             if train_seconds
             else float("nan")
         ),
@@ -398,7 +474,9 @@ def write_group_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
     if plots:
         from arld_jax import plots as plots_mod
 
-        log(f"figure: {plots_mod.plot_group(out)}")
+        path = plots_mod.plot_group(out)
+        if path is not None:
+            log(f"figure: {path}")
 
 
 def evaluate_expert(

@@ -1,7 +1,7 @@
 """The paper's figures (section 4, appendix A.2) from a sweep's run directory: numpy + matplotlib.
 
 `plot_all(run_dir)` writes PNGs into ``run_dir/figures/`` and skips the figures the run has no data
-for. Each ``fig*`` function takes the dict of `arld_jax.rundir.load_run` and returns a matplotlib
+for; `plot_group(group_dir)` draws Fig. 1 of a group of runs (one program per agent family). Each ``fig*`` function takes the dict of `arld_jax.rundir.load_run` and returns a matplotlib
 `Figure`, or None when there is nothing to plot.
 
 Figures are drawn on the Agg canvas directly (``Figure`` + ``FigureCanvasAgg``), never through
@@ -25,13 +25,15 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import EngFormatter
 
 from arld_jax.agents import REGISTRY
-from arld_jax.config import UNCERTAINTIES, paper_name
+from arld_jax.config import SHORT_NAMES, STRATEGIES, UNCERTAINTIES
+from arld_jax.config import cell_name as config_cell_name
 from arld_jax.rundir import (
     Cell,
     RunDir,
     env_steps_axis,
     expert_return,
     group_cells,
+    group_members,
     load_run,
     run_field,
     swept_fields,
@@ -43,7 +45,6 @@ DPI = 110
 SMOOTH_WINDOW = 5
 """Moving-average window of Fig. 3, in trace points."""
 
-_SHORT = {"demo_steps": "C", "query_prob": "b", "t_query": "t_query"}
 _LINESTYLES = ("-", "--", ":", "-.")
 
 Run = RunDir
@@ -115,27 +116,15 @@ def uncertainty_title(run: Run, uncertainty: str | None, default: str) -> str:
 
 
 def cell_name(run: Run, cell: Cell, exclude: Sequence[str] = ()) -> str:
-    """Short legend label in the paper's names, e.g. "AQSAC t_query=0.1", "BQNoisySAC b=0.4 C=2".
-
-    Built from the swept fields (every one but seed appears), so it carries the same information
-    as the cell_label; ``exclude`` drops fields a panel already fixes.
-    """
-    strategy = _field(run, cell, "strategy")
-    uncertainty = _field(run, cell, "uncertainty")
-    if strategy is None:
+    """Short legend label in the paper's names, e.g. "AQSAC t_query=0.1", "BQNoisySAC b=0.4 C=2"
+    (`config.cell_name`: every swept field the cell's strategy uses, so it tells the cells apart as
+    the cell_label does); ``exclude`` drops fields a panel already fixes."""
+    if _field(run, cell, "strategy") is None:
         return cell.cell_label or f"cell {cell.cell}"
-    parts = [paper_name(strategy, run.agent, uncertainty or "intrinsic")]
-    if strategy == "bernoulli" and "query_prob" not in exclude:
-        parts.append(f"b={_field(run, cell, 'query_prob'):g}")
-    if strategy == "active" and "t_query" not in exclude:
-        parts.append(f"t_query={_field(run, cell, 't_query'):g}")
-    skip = {"strategy", "uncertainty", "query_prob", "t_query", *exclude}
-    for name in swept_fields(run):
-        if name not in skip:
-            value = _field(run, cell, name)
-            text = f"{value:g}" if isinstance(value, float) else str(value)
-            parts.append(f"{_SHORT.get(name, name)}={text}")
-    return " ".join(parts) or cell.cell_label
+    swept = swept_fields(run)
+    names = {"strategy", "uncertainty", "query_prob", "t_query", *swept}
+    values = {name: _field(run, cell, name) for name in names}
+    return config_cell_name(values, swept, run.agent, exclude)
 
 
 def _colors(n: int) -> list[Any]:
@@ -349,7 +338,7 @@ def _fig_parameter(run: Run, strategy: str, param: str, label: str, number: int)
                 color=value_colors[value],
                 ls=style,
                 lw=1.4,
-                label=f"{_SHORT.get(param, param)}={value:g}{suffix}",
+                label=f"{SHORT_NAMES.get(param, param)}={value:g}{suffix}",
             )
             final_mean, final_half = mean_ci95(metrics["eval_return"][cell.runs, -1])
             xs.append(value)
@@ -601,38 +590,72 @@ def plot_all(run_dir: str | Path) -> list[Path]:
     return paths
 
 
-def plot_group(group_dir: str | Path) -> Path:
-    """Fig. 1 shape: final evaluation return (mean and 95% CI over seeds) of every cell of every
-    member of a group, one panel per agent family. Writes group_dir/figures/fig1_agents.png."""
-    from arld_jax.summary import summarize_group
+STRATEGY_COLORS: dict[str, Any] = {s: colormaps["tab10"](i) for i, s in enumerate(STRATEGIES)}
+"""One colour per query strategy, the same in every panel of Fig. 1."""
 
+
+def fig1_agents(group_dir: str | Path) -> Figure | None:
+    """Fig. 1: evaluation return vs env steps of each agent under each query strategy, mean over
+    seeds with its 95% CI band, as the paper draws it (Noisy TD3 left, Bootstrapped TD3 right).
+
+    One panel per agent variant of the group (`arld_jax.run plot` of a `SweepGroup` directory):
+    a member is split by uncertainty measure, so the `fig1` preset's TD3 member gives TD3 and
+    Noisy TD3, and its Bootstrapped TD3 member the third panel. One curve per cell, in the
+    paper's names (AQNoisyTD3, BQBootTD3, ...), a strategy in the same colour in every panel;
+    cells of one strategy that differ in another swept field take other line styles."""
+    runs = [load_run(member) for member in group_members(group_dir)]
+    panels = [
+        (run, uncertainty, cells)
+        for run in runs
+        if run.periods
+        for uncertainty, cells in _by_uncertainty(run, group_cells(run))
+    ]
+    if not panels:
+        return None
+    fig = Figure(figsize=(5.0 * len(panels), 4.6), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, len(panels), squeeze=False, sharey=True)[0]
+    for ax, (run, uncertainty, cells) in zip(axes, panels, strict=True):
+        steps = env_steps_axis(run)
+        drawn: dict[str, int] = {}
+        for cell in cells:
+            strategy = _field(run, cell, "strategy", "none")
+            style = _LINESTYLES[drawn.get(strategy, 0) % len(_LINESTYLES)]
+            drawn[strategy] = drawn.get(strategy, 0) + 1
+            color = STRATEGY_COLORS.get(strategy, "0.4")
+            mean, half = mean_ci95_columns(run.metrics["eval_return"][cell.runs])
+            ax.plot(steps, mean, color=color, ls=style, lw=1.5, label=cell_name(run, cell))
+            band = np.isfinite(half)
+            if band.any():
+                ax.fill_between(
+                    steps, mean - half, mean + half, where=band, color=color, alpha=0.15, lw=0
+                )
+        expert = expert_return(run)
+        if math.isfinite(expert):
+            ax.axhline(expert, color="black", lw=1.2, label=f"expert ({expert:.0f})")
+        display = REGISTRY[run.agent].variant(uncertainty or "intrinsic")
+        ax.set_title(uncertainty_title(run, uncertainty, display), fontsize=10)
+        _steps_axis(ax)
+        _legend(ax)
+    axes[0].set_ylabel("evaluation return (deterministic policy)")
+    partial = next((_partial_note(run) for run in runs if run.partial), "")
+    fig.suptitle(
+        "Fig. 1: evaluation return per agent and query strategy, mean and 95% CI over seeds"
+        + partial
+    )
+    return fig
+
+
+def plot_group(group_dir: str | Path) -> Path | None:
+    """Write Fig. 1 (`fig1_agents`) of a group's members to group_dir/figures/fig1_agents.png and
+    return its path (None before any member has an evaluation)."""
     group_dir = Path(group_dir)
-    rows = summarize_group(group_dir)
-    agents = list(dict.fromkeys(row["member"] for row in rows))
-    fig, axes = _new_figure(ncols=len(agents), width=4.2, height=4.6)
-    for ax, member in zip(axes, agents, strict=True):
-        mine = [row for row in rows if row["member"] == member]
-        colors = _colors(len(mine))
-        for i, row in enumerate(mine):
-            ax.errorbar(
-                i,
-                row["final_return_mean"],
-                yerr=row["final_return_ci95"] if math.isfinite(row["final_return_ci95"]) else None,
-                fmt="o",
-                color=colors[i],
-                capsize=4,
-            )
-        ax.set_xticks(range(len(mine)))
-        ax.set_xticklabels(
-            [row["cell_label"] or "base" for row in mine], rotation=40, ha="right", fontsize=7
-        )
-        ax.set_title(f"{mine[0]['agent']} ({member})", fontsize=10)
-        ax.set_ylabel("final evaluation return")
-        ax.grid(axis="y", alpha=0.3)
-    fig.suptitle("Final return per agent and cell, mean and 95% CI over seeds (cf. paper Fig. 1)")
+    fig = fig1_agents(group_dir)
+    if fig is None:
+        return None
     out = group_dir / "figures"
     out.mkdir(exist_ok=True)
     path = out / "fig1_agents.png"
-    fig.savefig(path, dpi=DPI, bbox_inches="tight")
+    fig.savefig(path, dpi=DPI)
     fig.clear()
     return path

@@ -82,7 +82,8 @@ def build_parser() -> argparse.ArgumentParser:
     """The parser of every command (`demonstrate`'s options: `arld_jax.human.cli`)."""
     parser = argparse.ArgumentParser(
         prog=PROG,
-        description="ARLD (SAC / Noisy SAC + expert queries) on MJX HalfCheetah.",
+        description="ARLD (SAC / Noisy SAC + expert queries) on HalfCheetah, stepped by MuJoCo's "
+        "C engine on a CPU and by MJX on an accelerator (--backend).",
         epilog=f"{PROG} COMMAND --help shows a command's options.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")

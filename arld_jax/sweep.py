@@ -218,8 +218,9 @@ def _cpu_arld_config() -> Config:
     steps, 8k env steps per run, one deterministic evaluation episode every 1,000 steps (HalfCheetah's
     deterministic returns vary little across initial states; evaluation costs as much as training
     env steps here), budget 1,500 demonstrated steps, N_r = 1,000, b = 0.1, t_query = 0.1 (the
-    paper's best values), C = 5."""
+    paper's best values), C = 5. MJX, not 'auto': the committed run (experiments/arld_cpu) used it."""
     return Config(
+        backend="mjx",
         num_envs=2,
         updates_per_env_step=0.5,
         learning_starts=1_000,
@@ -308,8 +309,11 @@ def _arld_100k_config() -> Config:
     (10,000 x 100k / 400k = 2,500), everything else as the paper; 5 deterministic evaluation
     episodes. Plain SAC is still below the expert at 100k (4,236 against 6,431: experiments/
     expert/), so demonstrations have room to matter. b = 0.1 for both uncertainty measures (the paper's best b
-    for Noisy SAC was 0.4; one b keeps BQSAC and BQNoisySAC spending alike)."""
-    return Config(replay_capacity=100_000, budget=2_500, expert_path=SHIPPED_EXPERT_PATH)
+    for Noisy SAC was 0.4; one b keeps BQSAC and BQNoisySAC spending alike). MJX, not 'auto':
+    the committed runs (experiments/arld_100k, fig1_100k) used it and resume by their commands."""
+    return Config(
+        backend="mjx", replay_capacity=100_000, budget=2_500, expert_path=SHIPPED_EXPERT_PATH
+    )
 
 
 def preset_arld() -> Sweep:

@@ -59,6 +59,59 @@ def test_invalid_value_raises_naming_the_field(field: str, overrides: dict[str, 
     assert "allowed" in str(err.value)
 
 
+def test_bad_backend_names_the_field_and_every_allowed_value() -> None:
+    with pytest.raises(ValueError) as err:
+        config.Config(backend="gpu")
+    assert str(err.value) == (
+        "Config.backend = 'gpu' is invalid: allowed one of 'auto', 'mjx', 'mujoco', "
+        "'generalized', 'positional', 'spring'."
+    )
+
+
+@pytest.mark.parametrize(
+    ("platform", "physics"), [("cpu", "mujoco"), ("gpu", "mjx"), ("tpu", "mjx")]
+)
+def test_auto_backend_is_resolved_when_the_config_is_built(monkeypatch, platform, physics) -> None:
+    """'auto' becomes the machine's fastest physics at construction (the C engine when jax computes
+    on the CPU, MJX on an accelerator), so config.json records what ran; explicit choices stay."""
+    monkeypatch.setattr(config, "jax_platform", lambda: platform)
+    assert config.auto_backend(platform) == physics
+    cfg = config.Config()
+    assert cfg.backend == physics and config.Config(backend="auto").backend == physics
+    assert dataclasses.asdict(cfg)["backend"] == physics
+    assert cfg.replace(budget=7).backend == physics
+    for chosen in ("mjx", "mujoco"):
+        assert config.Config(backend=chosen).backend == chosen
+        assert cfg.replace(backend=chosen).backend == chosen
+    line = config.physics_line(cfg, platform)
+    assert line.startswith(f"physics: {physics} (") and f"--backend auto on {platform}" in line
+    other = "mjx" if physics == "mujoco" else "mujoco"
+    line = config.physics_line(cfg.replace(backend=other), platform)
+    assert f"auto would take {physics} on {platform}" in line
+    assert "does not apply" in config.physics_line(config.tiny(), platform)
+
+
+def test_warmup_periods_count_every_period_with_a_random_step() -> None:
+    # tiny: warm-up 100 iterations, 250 per period -> period 0 is partly warm-up.
+    assert config.tiny().warmup_periods == 1
+    # 5,000 warm-up steps, an evaluation every 2,000: periods 0, 1 and half of 2.
+    assert config.Config(learning_starts=5_000, eval_every=2_000).warmup_periods == 3
+    assert config.Config(learning_starts=4_000, eval_every=2_000).warmup_periods == 2
+    assert config.tiny(learning_starts=0).warmup_periods == 0
+
+
+def test_cell_names_are_the_papers_with_the_swept_values_each_strategy_uses() -> None:
+    swept = ["strategy", "uncertainty", "demo_steps"]
+    base = {"uncertainty": "intrinsic", "query_prob": 0.2, "t_query": 0.1, "demo_steps": 5}
+    name = lambda agent="sac", **v: config.cell_name(base | v, swept, agent)  # noqa: E731
+    assert name(strategy="none") == "SAC"  # C does not change a run that never asks
+    assert name(strategy="greedy", agent="boot_td3") == "GQBootTD3 C=5"
+    assert name(strategy="bernoulli", uncertainty="extrinsic") == "BQNoisySAC b=0.2 C=5"
+    assert name(strategy="active", agent="td3") == "AQTD3 t_query=0.1 C=5"
+    values = base | {"strategy": "active"}
+    assert config.cell_name(values, swept, exclude=("t_query",)) == "AQSAC C=5"
+
+
 def test_replace_validates_again() -> None:
     cfg = config.tiny()
     with pytest.raises(ValueError, match=r"Config\.budget"):

@@ -90,7 +90,7 @@ def test_building_halfcheetah_prints_no_third_party_noise(capfd):
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        env = make_env(Config())
+        env = make_env(Config(backend="mjx"))
     out, err = capfd.readouterr()
     assert env.obs_dim == 17
     assert "settotalmass" not in out + err, out + err

@@ -480,3 +480,79 @@ def test_plot_all_of_a_full_sweep_writes_every_figure_but_the_gait(full_dir: Pat
     paths = {p.stem: p for p in plots.plot_all(full_dir)}
     assert set(paths) == set(plots.FIGURES) - {"gait", "falls"}  # the toy env: no gait, no fall
     assert all(_png_ok(p) for p in paths.values())
+
+
+# ---------------------------------------------------------------- Fig. 1: a group of agent families
+
+
+TD3_CELLS = [
+    {"strategy": "none", "uncertainty": "intrinsic"},
+    {"strategy": "active", "uncertainty": "intrinsic"},
+    {"strategy": "none", "uncertainty": "extrinsic"},
+    {"strategy": "bernoulli", "uncertainty": "extrinsic"},
+]
+TD3_SWEEP = {"strategy": ["none", "bernoulli", "active"], "uncertainty": ["intrinsic", "extrinsic"]}
+BOOT_CELLS = [{"strategy": "none"}, {"strategy": "greedy"}, {"strategy": "active"}]
+BOOT_SWEEP = {"strategy": ["none", "greedy", "active"]}
+
+
+def _member(path: Path, agent: str, cells: list[dict], sweep: dict, periods: int) -> Path:
+    write_run_dir(path, cells, sweep, periods=periods, total_periods=PERIODS)
+    config = json.loads((path / "config.json").read_text())
+    config["config"]["agent"] = agent
+    (path / "config.json").write_text(json.dumps(config))
+    return path
+
+
+def test_fig1_draws_a_panel_per_agent_variant_and_a_curve_per_strategy(tmp_path: Path) -> None:
+    """A group of TD3 (with Noisy TD3 cells) and Bootstrapped TD3, the latter partial: three panels
+    (TD3, Noisy TD3, Bootstrapped TD3) of learning curves in the paper's names, each the mean over
+    seeds with a band, a strategy in one colour everywhere."""
+    group = tmp_path / "group"
+    td3 = _member(group / "agent-td3", "td3", TD3_CELLS, TD3_SWEEP, PERIODS)
+    boot = _member(group / "agent-boot_td3", "boot_td3", BOOT_CELLS, BOOT_SWEEP, 3)
+    (group / "group.json").write_text(json.dumps({"members": [td3.name, boot.name]}))
+    fig = _make(plots.fig1_agents(group))
+    axes = fig.axes
+    assert [ax.get_title() for ax in axes] == [
+        "TD3: twin-critic gap |Q₀ − Q₁|",
+        "Extrinsic uncertainty: Noisy TD3 Var[μ̃]",
+        "Bootstrapped TD3: the heads' disagreement",
+    ]
+    expert = "expert (3000)"
+    assert [_legend(ax) for ax in axes] == [
+        ["TD3", "AQTD3 t_query=0.1", expert],
+        ["NoisyTD3", "BQNoisyTD3 b=0.2", expert],
+        ["BootTD3", "GQBootTD3", "AQBootTD3 t_query=0.1", expert],
+    ]
+    panels = [(axes[0], td3, {0: "TD3", 1: "AQTD3 t_query=0.1"})]
+    panels += [(axes[1], td3, {2: "NoisyTD3", 3: "BQNoisyTD3 b=0.2"})]
+    panels += [(axes[2], boot, {0: "BootTD3", 1: "GQBootTD3", 2: "AQBootTD3 t_query=0.1"})]
+    colors = {}
+    for ax, path, names in panels:
+        metrics, cells = _files(path)
+        steps = metrics["env_steps"][0]
+        assert len(ax.collections) == len(names)  # one CI band per curve
+        for band_index, (c, name) in enumerate(names.items()):
+            x, y = _lines(ax)[name]
+            np.testing.assert_array_equal(x, steps)
+            mean = _seed_mean(metrics["eval_return"], cells[c])
+            np.testing.assert_allclose(y, mean)
+            # seeds add 0, 10, 20: the band is mean -+ t(0.975, 2) * 10 / sqrt(3) = 24.84
+            low, high = _band(ax, band_index)[float(steps[0])]
+            np.testing.assert_allclose(
+                [low, high], [mean[0] - 24.8414, mean[0] + 24.8414], atol=1e-3
+            )
+            strategy = name[:2] if name[:2] in ("GQ", "BQ", "AQ") else "none"
+            line = next(ln for ln in ax.get_lines() if ln.get_label() == name)
+            colors.setdefault(strategy, line.get_color())
+            assert line.get_color() == colors[strategy], name
+        assert ax.get_xlabel() == "environment steps"
+    assert len(_lines(axes[2])["BootTD3"][0]) == 3  # the partial member's periods present
+    assert axes[0].get_ylabel() == "evaluation return (deterministic policy)"
+    assert fig.get_suptitle() == (
+        "Fig. 1: evaluation return per agent and query strategy, mean and 95% CI over seeds"
+        "\n[partial: 3,000 of 4,000 env steps]"
+    )
+    path = plots.plot_group(group)
+    assert path == group / "figures" / "fig1_agents.png" and _png_ok(path)

@@ -233,6 +233,65 @@ def test_resume_with_mujoco_c_physics_equals_uninterrupted(tmp_path):
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
 
 
+def test_a_line_per_period_and_the_same_numbers_whatever_the_chunk(uninterrupted, tmp_path):
+    """One period is compiled and called period after period, so a run checkpointed every 2
+    periods prints a line after each of its 4 periods and equals the run checkpointed after every
+    period; the lines name the cells as the figures do, with each cell's seed-mean return."""
+    sweep, full = uninterrupted
+    lines: list[str] = []
+    options = driver.RunOptions(
+        chunk_periods=2, plots=False, log=lambda *a: lines.append(" ".join(map(str, a)))
+    )
+    driver.run_sweep(sweep, tmp_path, options)
+    assert lines[0] == "physics: none (toy is pure JAX; --backend does not apply)"
+    progress = [line for line in lines if line.startswith("period ")]
+    assert [line.split(" | ")[0] for line in progress] == [
+        "period 1/4 (warm-up)",
+        "period 2/4",
+        "period 3/4",
+        "period 4/4",
+    ]
+    tails = [line.split(" | ")[5:] for line in progress]
+    assert tails == [[], ["checkpoint 1/2"], [], ["checkpoint 2/2"]]
+    assert "ETA after the first learning period" in progress[0]
+    assert progress[1].split(" | ")[3].startswith("ETA ") and "ETA 0 s" in progress[3]
+    a, b = np.load(full / rundir.METRICS_FILE), np.load(tmp_path / rundir.METRICS_FILE)
+    for name in a.files:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    returns = a["eval_return"][:, 2].reshape(3, 2).mean(axis=1)  # 3 cells x seeds 0, 1
+    want = ", ".join(
+        f"{n} {r:,.0f}" for n, r in zip(["SAC", "GQSAC", "AQSAC t_query=0.1"], returns, strict=True)
+    )
+    assert progress[2].split(" | ")[4] == f"eval return {want}"
+
+
+def test_eta_counts_warm_up_and_learning_periods_apart():
+    # 10 periods, 2 of warm-up at 3 s each, learning periods at 20 s each.
+    assert driver.eta_seconds(0, 2, 10, None, None) is None
+    assert driver.eta_seconds(1, 2, 10, 3.0, None) is None  # no learning period timed yet
+    assert driver.eta_seconds(2, 2, 10, 3.0, None) is None
+    assert driver.eta_seconds(3, 2, 10, 3.0, 20.0) == 7 * 20.0
+    assert driver.eta_seconds(10, 2, 10, 3.0, 20.0) == 0.0
+    # Resumed in the middle of the warm-up with learning time known: 1 warm + 8 learning left.
+    assert driver.eta_seconds(1, 2, 10, 3.0, 20.0) == 3.0 + 8 * 20.0
+    # Resumed after the warm-up: no warm-up time needed.
+    assert driver.eta_seconds(4, 2, 10, None, 20.0) == 6 * 20.0
+    assert driver.eta_seconds(0, 0, 5, None, 20.0) == 100.0
+    assert driver.format_eta(None) == "ETA after the first learning period"
+    assert driver.format_eta(12.4) == "ETA 12 s" and driver.format_eta(90.0) == "ETA 1.5 min"
+    assert driver.format_eta(7200.0) == "ETA 2.0 h"
+
+
+def test_latest_returns_name_each_cell_with_its_seed_mean():
+    names = [f"c{i}" for i in range(12)]
+    returns = np.repeat(np.arange(12.0) * 100, 2) + np.tile([0.0, 10.0], 12)  # 2 seeds a cell
+    assert driver.latest_returns(names[:2], returns[:4]) == "c0 5, c1 105"
+    text = driver.latest_returns(names, returns)  # the 10 best of 12, in cell order
+    assert text.startswith("c2 205, c3 305") and text.endswith(
+        "c11 1,105 (the best 10 of 12 cells)"
+    )
+
+
 def test_checkpoint_of_another_state_layout_is_refused(uninterrupted, tmp_path):
     """A checkpoint whose TrainState layout differs (written by an older arld_jax) is not restored
     position by position into the new state: a clear error, and the saved metrics are kept."""

@@ -49,7 +49,7 @@ DESCRIPTION = cli.paragraph(
 
 
 def human_config(**overrides: Any) -> Config:
-    """The `human` preset: AQSAC on MJX HalfCheetah sized for one person's afternoon.
+    """The `human` preset: AQSAC on HalfCheetah sized for one person's afternoon.
 
     One env (one cheetah to watch), one update per env step, 8k env steps, 1k warm-up, evaluation
     every 1k steps, N_r = 1k, t_query = 0.1 (the paper's best), C = 5 and a budget of 200
