@@ -10,7 +10,7 @@ All four strategies run on device, per env, inside the scanned loop, and are sel
                      reference window holding the last N_r uncertainties (Chen et al. 2020's
                      proportion-based rule, which the paper reuses with N_r = 5000).
 
-Readings of the paper that are ours (documented in the README too):
+Readings of the paper that are ours (documented in docs/paper_readings.md too):
 
 * Reference window: by default it records the uncertainty of EVERY visited state (agent- or
   expert-controlled; with several envs, all of them), so it describes the agent's recent uncertainty
