@@ -28,6 +28,7 @@ import jax.numpy as jnp
 
 from arld_jax import checks
 from arld_jax.agents import REGISTRY
+from arld_jax.tasks import REGISTRY as TASKS
 
 STRATEGIES: tuple[str, ...] = ("none", "greedy", "bernoulli", "active")
 """Query strategies (paper section 4): SAC, GQSAC, BQSAC, AQSAC. The index is the id used on device."""
@@ -57,7 +58,9 @@ def paper_name(strategy: str, agent: str = "sac", uncertainty: str = "intrinsic"
     return STRATEGY_PREFIX[strategy] + REGISTRY[agent].variant(uncertainty)
 
 
-ENVS: tuple[str, ...] = ("halfcheetah", "toy", "toy_fall")
+ENVS: tuple[str, ...] = tuple(TASKS)
+"""Tasks, one module each in `arld_jax.tasks` (Brax's halfcheetah, hopper, walker2d, ant, and the
+pure-JAX stand-ins of the tests)."""
 BACKENDS: tuple[str, ...] = ("mjx", "mujoco", "generalized", "positional", "spring")
 REDUCTIONS: tuple[str, ...] = ("mean", "max", "sum")
 WINDOW_RECORDS: tuple[str, ...] = ("all", "agent")
@@ -73,13 +76,15 @@ class Config(*AGENT_OPTIONS):
 
     # ---- environment (static) ----
     env_name: str = "halfcheetah"
-    """'halfcheetah' (Brax, MuJoCo physics), or the cheap pure-JAX stand-ins of the tests: 'toy' (never
-    ends early) and 'toy_fall' (an episode ends when the action strays far from the target)."""
+    """The task, one of `ENVS` (a module each in `arld_jax.tasks`): Brax's 'halfcheetah' (never
+    falls), 'hopper', 'walker2d', 'ant' (a fall ends the episode), or the cheap pure-JAX stand-ins
+    of the tests: 'toy' (never ends early) and 'toy_fall' (ends when the action strays far from
+    the target)."""
     backend: str = "mjx"
-    """Physics of halfcheetah: 'mjx' (MuJoCo-MJX through Brax, the default), 'mujoco' (MuJoCo's C
-    engine on the host through `jax.pure_callback`: Brax's same model, options, observation and
-    reward, a step many times cheaper than MJX's on CPU, for CPU runs; `envs.mujoco_halfcheetah`)
-    or one of Brax's own pipelines."""
+    """Physics of a Brax task: 'mjx' (MuJoCo-MJX through Brax, the default), 'mujoco' (MuJoCo's C
+    engine on the host through `jax.pure_callback`: Brax's same task, model, options, observation,
+    reward and health rule, a step many times cheaper than MJX's on CPU, for CPU runs;
+    `arld_jax.physics`) or one of Brax's own pipelines. The toy tasks ignore it."""
     num_envs: int = 1
     """Environments stepped in parallel per run (vmapped). The paper uses one."""
     env_max_batch: int = 0
