@@ -195,7 +195,9 @@ class Config(*AGENT_OPTIONS):
     query_during_warmup: bool = True
     """Allow queries during the random warm-up (the budget is paced from step 0, as in the paper)."""
     expert_path: str | None = None
-    """Directory of the expert checkpoint (needed unless every strategy is 'none')."""
+    """Directory of the expert checkpoint (needed unless every strategy is 'none'). None: the
+    expert shipped for the task (`TaskSpec.expert_dir`; HalfCheetah's is experiments/expert), or
+    the toy tasks' closed-form expert."""
     expert_stochastic: bool = False
     """Expert samples from its policy instead of acting with tanh(mu)."""
 
