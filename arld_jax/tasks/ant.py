@@ -11,7 +11,7 @@ torso's height leaves [0.2, 1.0] (flipped over or jumped).
 
 from __future__ import annotations
 
-from arld_jax.tasks.base import TaskSpec
+from arld_jax.tasks.base import TaskSpec, pose_after_root_xy
 
 SPEC = TaskSpec(
     name="ant",
@@ -19,4 +19,5 @@ SPEC = TaskSpec(
     can_terminate=True,
     expert_dir="experiments/expert_ant",
     brax_name="ant",
+    pose=pose_after_root_xy,
 )

@@ -18,6 +18,7 @@ from typing import Any, NamedTuple
 import flax.struct
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from arld_jax.types import PRNGKey
 
@@ -46,6 +47,33 @@ def never_upside_down(obs: jax.Array) -> jax.Array:
     return jnp.zeros(obs.shape[:-1], bool)
 
 
+Pose = Callable[[np.ndarray, Any], tuple[np.ndarray, float]]
+"""(observation, the task's MjModel) -> (qpos to draw, forward speed): what the demonstration
+page draws of a state (`arld_jax.human.frames`). The root's unobserved x (and y) are set to 0, so
+the body is drawn centred."""
+
+
+def pose_after_root_x(obs: np.ndarray, model: Any) -> tuple[np.ndarray, float]:
+    """Brax's planar observation qpos[1:], qvel (HalfCheetah)."""
+    k = model.nq - 1
+    return np.concatenate([[0.0], obs[:k]]), float(obs[k])
+
+
+def pose_with_height(obs: np.ndarray, model: Any) -> tuple[np.ndarray, float]:
+    """Brax's planar observation with the torso's height in place of the root's z slide (Hopper,
+    Walker2d): the slide is the height less the torso's height at qpos0."""
+    k = model.nq - 1
+    qpos = np.concatenate([[0.0], obs[:k]])
+    qpos[1] = obs[0] - model.body_pos[1, 2]
+    return qpos, float(obs[k])
+
+
+def pose_after_root_xy(obs: np.ndarray, model: Any) -> tuple[np.ndarray, float]:
+    """Brax's observation of a free root, qpos[2:], qvel, ... (Ant, Humanoid)."""
+    k = model.nq - 2
+    return np.concatenate([[0.0, 0.0], obs[:k]]), float(obs[k])
+
+
 @dataclass(frozen=True)
 class TaskSpec:
     """Everything the rest of the package knows of a task before building it.
@@ -71,6 +99,8 @@ class TaskSpec:
     reads_velocities: bool = False
     """Whether Brax's task reads the bodies' velocities (`xd`: Humanoid's observation); the others
     read q, qd and the bodies' frames only, and the C engine returns no more (`physics`)."""
+    pose: Pose | None = None
+    """How the demonstration page draws a state (a Brax task's); None: the page shows numbers."""
     make_pure: Callable[[], Env] | None = None
     """A pure-JAX task's env (no physics: the same on every backend)."""
     target_action: Callable[[jax.Array], jax.Array] | None = None

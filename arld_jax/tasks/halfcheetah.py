@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 
 from arld_jax import gait
-from arld_jax.tasks.base import TaskSpec
+from arld_jax.tasks.base import TaskSpec, pose_after_root_x
 
 
 def halfcheetah_upside_down(obs: jax.Array) -> jax.Array:
@@ -29,5 +29,6 @@ SPEC = TaskSpec(
     can_terminate=False,
     expert_dir="experiments/expert",
     brax_name="halfcheetah",
+    pose=pose_after_root_x,
     upside_down=halfcheetah_upside_down,
 )

@@ -11,7 +11,7 @@ qpos[2:], qvel is outside (-100, 100).
 
 from __future__ import annotations
 
-from arld_jax.tasks.base import TaskSpec
+from arld_jax.tasks.base import TaskSpec, pose_with_height
 
 SPEC = TaskSpec(
     name="hopper",
@@ -19,4 +19,5 @@ SPEC = TaskSpec(
     can_terminate=True,
     expert_dir="experiments/expert_hopper",
     brax_name="hopper",
+    pose=pose_with_height,
 )

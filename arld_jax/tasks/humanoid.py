@@ -13,7 +13,7 @@ bodies' velocities (`reads_velocities`).
 
 from __future__ import annotations
 
-from arld_jax.tasks.base import TaskSpec
+from arld_jax.tasks.base import TaskSpec, pose_after_root_xy
 
 SPEC = TaskSpec(
     name="humanoid",
@@ -21,5 +21,6 @@ SPEC = TaskSpec(
     can_terminate=True,
     expert_dir="experiments/expert_humanoid",
     brax_name="humanoid",
+    pose=pose_after_root_xy,
     reads_velocities=True,
 )

@@ -14,7 +14,7 @@ expert tells the two apart (`arld_jax.expert`).
 
 from __future__ import annotations
 
-from arld_jax.tasks.base import TaskSpec
+from arld_jax.tasks.base import TaskSpec, pose_with_height
 
 SPEC = TaskSpec(
     name="walker2d",
@@ -22,4 +22,5 @@ SPEC = TaskSpec(
     can_terminate=True,
     expert_dir="experiments/expert_walker2d",
     brax_name="walker2d",
+    pose=pose_with_height,
 )
