@@ -30,6 +30,7 @@ import jax.numpy as jnp
 
 from arld_jax import checks
 from arld_jax.agents import REGISTRY
+from arld_jax.tasks import REGISTRY as TASKS
 
 STRATEGIES: tuple[str, ...] = ("none", "greedy", "bernoulli", "active")
 """Query strategies (paper section 4): SAC, GQSAC, BQSAC, AQSAC. The index is the id used on device."""
@@ -103,7 +104,7 @@ def auto_backend(platform: str) -> str:
 
 def physics_line(cfg: Config, platform: str) -> str:
     """One line saying which physics `cfg` runs and how it relates to 'auto' on `platform`."""
-    if cfg.env_name != "halfcheetah":
+    if TASKS[cfg.env_name].brax_name is None:
         return f"physics: none ({cfg.env_name} is pure JAX; --backend does not apply)"
     auto = auto_backend(platform)
     how = (
@@ -114,7 +115,9 @@ def physics_line(cfg: Config, platform: str) -> str:
     return f"physics: {cfg.backend} ({PHYSICS[cfg.backend]}; {how})"
 
 
-ENVS: tuple[str, ...] = ("halfcheetah", "toy", "toy_fall")
+ENVS: tuple[str, ...] = tuple(TASKS)
+"""Tasks, one module each in `arld_jax.tasks` (Brax's halfcheetah, hopper, walker2d, ant, and the
+pure-JAX stand-ins of the tests)."""
 PHYSICS: dict[str, str] = {
     "mjx": "MuJoCo-MJX through Brax",
     "mujoco": "MuJoCo's C engine",
@@ -138,16 +141,18 @@ class Config(*AGENT_OPTIONS):
 
     # ---- environment (static) ----
     env_name: str = "halfcheetah"
-    """'halfcheetah' (Brax, MuJoCo physics), or the cheap pure-JAX stand-ins of the tests: 'toy' (never
-    ends early) and 'toy_fall' (an episode ends when the action strays far from the target)."""
+    """The task, one of `ENVS` (a module each in `arld_jax.tasks`): Brax's 'halfcheetah' (never
+    falls), 'hopper', 'walker2d', 'ant' (a fall ends the episode), or the cheap pure-JAX stand-ins
+    of the tests: 'toy' (never ends early) and 'toy_fall' (ends when the action strays far from
+    the target)."""
     backend: str = "auto"
-    """Physics of halfcheetah. 'auto' (the default) takes the fastest for the machine when the
+    """Physics of a Brax task. 'auto' (the default) takes the fastest for the machine when the
     Config is built, so config.json names the physics that ran: 'mujoco' when jax computes on the
     CPU, 'mjx' on an accelerator. 'mjx': MuJoCo-MJX through Brax, stepped on the device. 'mujoco':
-    MuJoCo's C engine on the host through `jax.pure_callback`, Brax's same model, options,
-    observation and reward, a step many times cheaper than MJX's on CPU
-    (`envs.mujoco_halfcheetah`). Or one of Brax's own pipelines ('generalized', 'positional',
-    'spring'). The toy envs ignore it."""
+    MuJoCo's C engine on the host through `jax.pure_callback`, Brax's same task, model, options,
+    observation, reward and health rule, a step many times cheaper than MJX's on CPU
+    (`arld_jax.physics`). Or one of Brax's own pipelines ('generalized', 'positional', 'spring').
+    The toy tasks ignore it."""
     num_envs: int = 1
     """Environments stepped in parallel per run (vmapped). The paper uses one."""
     env_max_batch: int = 0
@@ -258,7 +263,9 @@ class Config(*AGENT_OPTIONS):
     query_during_warmup: bool = True
     """Allow queries during the random warm-up (the budget is paced from step 0, as in the paper)."""
     expert_path: str | None = None
-    """Directory of the expert checkpoint (needed unless every strategy is 'none')."""
+    """Directory of the expert checkpoint (needed unless every strategy is 'none'). None: the
+    expert shipped for the task (`TaskSpec.expert_dir`; HalfCheetah's is experiments/expert), or
+    the toy tasks' closed-form expert."""
     expert_stochastic: bool = False
     """Expert samples from its policy instead of acting with tanh(mu)."""
 

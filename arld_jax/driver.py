@@ -41,7 +41,7 @@ from arld_jax.rundir import (
     state_samples,
     to_checkpoint,
 )
-from arld_jax.sweep import REPO_ROOT, SHIPPED_EXPERT, Sweep, SweepGroup, resolve_expert_path
+from arld_jax.sweep import REPO_ROOT, Sweep, SweepGroup, expert_path_for, task_expert_dir
 
 
 @dataclasses.dataclass(frozen=True)
@@ -307,21 +307,19 @@ def run_sweep(
 
 
 def expert_for(cfg: Config):  # noqa: ANN202
+    """The expert that runs of `cfg` ask (`sweep.expert_path_for`: `--expert_path`, else the
+    task's shipped one, else the toy tasks' closed-form expert), checked against the task before
+    anything compiles: SystemExit with the reason when there is none or it does not fit."""
     from arld_jax.envs import make_env
-    from arld_jax.expert import load_expert, read_expert_meta, toy_expert
+    from arld_jax.expert import check_expert_task, load_expert, read_expert_meta, toy_expert
 
-    if cfg.env_name in ("toy", "toy_fall") and cfg.expert_path is None:
-        return toy_expert()
-    if cfg.expert_path is None:
-        raise SystemExit(
-            "error: a query strategy other than 'none' needs an expert: set --expert_path "
-            f"(the shipped HalfCheetah expert is {SHIPPED_EXPERT})"
-        )
     try:
-        path = resolve_expert_path(cfg.expert_path)
-        read_expert_meta(path)  # fail fast, before building the env
-        env = make_env(cfg)
-        return load_expert(path, env.obs_dim, env.action_dim, cfg.expert_stochastic)
+        path = expert_path_for(cfg)
+        if path is None:
+            return toy_expert()
+        check_expert_task(read_expert_meta(path), path, cfg.env_name)  # before building the env
+        env = make_env(cfg)  # traced, not compiled: its sizes
+        return load_expert(path, env.obs_dim, env.action_dim, cfg.expert_stochastic, cfg.env_name)
     except (FileNotFoundError, ValueError) as err:
         raise SystemExit(f"error: {err}") from None
 
@@ -365,9 +363,20 @@ def train_expert(sweep: Sweep, out: Path, options: RunOptions) -> Path:
     return export_expert(run_dir, out)
 
 
-def export_expert(run_dir: Path, out: Path) -> Path:
+def default_expert_out(env_name: str) -> Path:
+    """Where `train_expert` and `export_expert` save a task's expert unless told: the task's
+    expert directory (`sweep.task_expert_dir`), where its runs then find it."""
+    try:
+        return task_expert_dir(env_name)
+    except ValueError as err:
+        raise SystemExit(f"error: {err}: pass --out DIR") from None
+
+
+def export_expert(run_dir: Path, out: Path | None = None) -> Path:
     """Save, as the expert, the actor of the run with the best latest evaluation return in the
-    latest checkpoint of `run_dir` (a finished or a still-running plain-SAC run)."""
+    latest checkpoint of `run_dir` (a finished or a still-running plain-SAC run), into `out`
+    (default: the run's task's expert directory). Its metadata records the task (`env_name`),
+    which `expert.check_expert_task` checks against the runs that ask it."""
     import jax
     import orbax.checkpoint as ocp
 
@@ -378,6 +387,7 @@ def export_expert(run_dir: Path, out: Path) -> Path:
     saved = json.loads((run_dir / CONFIG_FILE).read_text())
     cfg_dict = dict(saved["config"], hidden_sizes=tuple(saved["config"]["hidden_sizes"]))
     cfg = Config(**cfg_dict)
+    out = out if out is not None else default_expert_out(cfg.env_name)
     if not REGISTRY[cfg.agent].exports_expert:
         able = ", ".join(repr(n) for n, spec in REGISTRY.items() if spec.exports_expert)
         raise SystemExit(

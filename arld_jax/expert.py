@@ -55,8 +55,8 @@ class Expert(NamedTuple):
 
 
 def toy_expert() -> Expert:
-    """The toy env's optimal policy, known in closed form: the expert of tests and tiny runs."""
-    from arld_jax.envs import toy_target_action
+    """The toy tasks' optimal policy, known in closed form: the expert of tests and tiny runs."""
+    from arld_jax.tasks.toy import toy_target_action
 
     return Expert(
         params={},
@@ -100,27 +100,64 @@ def read_expert_meta(path: str | Path) -> dict[str, Any]:
     if not meta_file.is_file() or not (path / PARAMS_DIR).is_dir():
         raise FileNotFoundError(
             f"No expert at {path}: expected {META_FILE} and {PARAMS_DIR}/ there. Train one with "
-            "`python -m arld_jax.run train_expert`, or pass --expert_path experiments/expert "
-            "(the shipped HalfCheetah expert)."
+            "`python -m arld_jax.run train_expert --env_name TASK`, or leave --expert_path unset "
+            "for the task's shipped expert (HalfCheetah's: experiments/expert)."
         )
     return json.loads(meta_file.read_text())
 
 
-def load_expert(
-    path: str | Path, obs_dim: int, action_dim: int, stochastic: bool = False
-) -> Expert:
-    """Load an expert saved by `save_expert`, checking it fits the environment.
+HALFCHEETAH_OBS_DIM = 17
 
-    Raises FileNotFoundError if nothing is there and ValueError if its shapes do not fit."""
+
+def expert_task(meta: dict[str, Any]) -> str | None:
+    """The task an expert acts in: the `env_name` its exporter recorded (`driver.export_expert`,
+    `human.expert.clone_expert`), or None where unknown."""
+    recorded = meta.get("env_name")
+    if recorded is not None:
+        return str(recorded)
+    # An expert with no task recorded was saved when HalfCheetah was the only task with physics:
+    # one of HalfCheetah's 17 observations is HalfCheetah's (Walker2d's 17 came later, always
+    # recorded). Other sizes were the toy stand-in's or unknown: the sizes' check alone applies.
+    return "halfcheetah" if meta.get("obs_dim") == HALFCHEETAH_OBS_DIM else None
+
+
+def check_expert_task(meta: dict[str, Any], path: str | Path, env_name: str) -> None:
+    """ValueError unless the expert at `path` (its metadata `meta`) acts in task `env_name`: an
+    expert of another task with the same sizes (Walker2d's and HalfCheetah's are both 17 and 6)
+    would run without complaint and demonstrate nonsense."""
+    task = expert_task(meta)
+    if task is not None and task != env_name:
+        raise ValueError(
+            f"Expert at {Path(path).absolute()} acts in task {task!r}, but this run's task is "
+            f"{env_name!r}: leave --expert_path unset for {env_name!r}'s shipped expert, pass the "
+            f"directory of an expert of {env_name!r}, or train one with `python -m arld_jax.run "
+            f"train_expert --env_name {env_name}`."
+        )
+
+
+def load_expert(
+    path: str | Path,
+    obs_dim: int,
+    action_dim: int,
+    stochastic: bool = False,
+    env_name: str | None = None,
+) -> Expert:
+    """Load an expert saved by `save_expert`, checking it fits the environment: its task (when
+    `env_name` is given, `check_expert_task`) and its sizes.
+
+    Raises FileNotFoundError if nothing is there and ValueError if it does not fit."""
     import orbax.checkpoint as ocp
 
     path = Path(path).absolute()
     meta = read_expert_meta(path)
+    if env_name is not None:
+        check_expert_task(meta, path, env_name)
     if (meta.get("obs_dim"), meta.get("action_dim")) != (obs_dim, action_dim):
         raise ValueError(
             f"Expert at {path} was trained for obs_dim={meta.get('obs_dim')}, "
-            f"action_dim={meta.get('action_dim')} (env {meta.get('env_name')!r}), but this env has "
-            f"obs_dim={obs_dim}, action_dim={action_dim}."
+            f"action_dim={meta.get('action_dim')} (task {expert_task(meta)!r}), but "
+            f"{'task ' + repr(env_name) if env_name else 'this env'} has obs_dim={obs_dim}, "
+            f"action_dim={action_dim}."
         )
     actor = Actor(
         action_dim=action_dim,

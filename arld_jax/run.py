@@ -65,7 +65,13 @@ def _add_training_arguments(p: argparse.ArgumentParser, command: str) -> None:
     """seed_sweep's and train_expert's options: preset, output, seeds, run options, fields."""
     presets = SWEEP_PRESETS if command == "seed_sweep" else TRAIN_PRESETS
     cli.add_preset_option(p, presets, default="default" if command == "seed_sweep" else "expert")
-    p.add_argument("--out", default=None, help="output directory (resumes if it holds this run)")
+    out_help = "output directory (resumes if it holds this run)"
+    if command == "train_expert":
+        out_help += (
+            "; default: the task's expert directory, where its runs find it (experiments/expert "
+            "for halfcheetah, experiments/expert_<task> for the others)"
+        )
+    p.add_argument("--out", default=None, help=out_help)
     p.add_argument("--seeds", default=None, help="comma-separated seeds, e.g. 0,1,2")
     p.add_argument("--num_seeds", default=None, help="seeds 0..N-1")
     cli.add_run_options(p)
@@ -82,8 +88,9 @@ def build_parser() -> argparse.ArgumentParser:
     """The parser of every command (`demonstrate`'s options: `arld_jax.human.cli`)."""
     parser = argparse.ArgumentParser(
         prog=PROG,
-        description="ARLD (SAC / Noisy SAC + expert queries) on HalfCheetah, stepped by MuJoCo's "
-        "C engine on a CPU and by MJX on an accelerator (--backend).",
+        description="ARLD (SAC / Noisy SAC + expert queries) on Brax's MuJoCo tasks (HalfCheetah, "
+        "Hopper, Walker2d, Ant), stepped by MuJoCo's C engine on a CPU and by MJX on an "
+        "accelerator (--backend).",
         epilog=f"{PROG} COMMAND --help shows a command's options.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -120,7 +127,11 @@ def build_parser() -> argparse.ArgumentParser:
     comp.add_argument("--out", default=None, help="also write the table to this markdown file")
     export = commands["export_expert"]
     export.add_argument("run_dir", help="a plain-SAC run directory with a checkpoint")
-    export.add_argument("--out", default=None, help=f"expert directory (default {SHIPPED_EXPERT})")
+    export.add_argument(
+        "--out",
+        default=None,
+        help=f"expert directory (default: the run's task's, {SHIPPED_EXPERT} for halfcheetah)",
+    )
     check = commands["evaluate_expert"]
     check.add_argument(
         "expert_dir", nargs="?", default=str(SHIPPED_EXPERT), help="a saved expert's directory"
@@ -222,7 +233,7 @@ def main(argv: list[str] | None = None) -> None:
         return
     args, sweep = parse_args(argv)
     if args.command == "export_expert":
-        driver.export_expert(Path(args.run_dir), Path(args.out) if args.out else SHIPPED_EXPERT)
+        driver.export_expert(Path(args.run_dir), Path(args.out) if args.out else None)
         return
     if args.command == "evaluate_expert":
         if args.episodes < 2:
@@ -256,7 +267,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.command == "train_expert":
         if isinstance(sweep, SweepGroup):
             raise SystemExit("error: train_expert trains the SAC expert: --agent takes no list")
-        driver.train_expert(sweep, Path(args.out) if args.out else SHIPPED_EXPERT, options)
+        out = Path(args.out) if args.out else driver.default_expert_out(sweep.cfg.env_name)
+        driver.train_expert(sweep, out, options)
         return
     out = Path(args.out) if args.out else _default_out(args.command, args.preset)
     if isinstance(sweep, SweepGroup):

@@ -38,10 +38,12 @@ from arld_jax.config import (
     HParams,
     hparams_from_config,
 )
+from arld_jax.tasks import REGISTRY as TASKS
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-SHIPPED_EXPERT_PATH = "experiments/expert"
-"""The shipped expert, relative to the repository root (resolved by `resolve_expert_path`)."""
+SHIPPED_EXPERT_PATH = TASKS["halfcheetah"].expert_dir
+"""The shipped HalfCheetah expert, relative to the repository root (the default of
+`evaluate_expert`); every task's is its `TaskSpec.expert_dir` (`task_expert_dir`)."""
 SHIPPED_EXPERT = REPO_ROOT / SHIPPED_EXPERT_PATH
 
 RELEVANT_FOR: dict[str, tuple[str, ...]] = {
@@ -60,6 +62,39 @@ def resolve_expert_path(path: str) -> Path:
     if p.is_absolute() or p.exists():
         return p
     return REPO_ROOT / p
+
+
+def task_expert_dir(env_name: str) -> Path:
+    """Where the expert of task `env_name` is shipped (`TaskSpec.expert_dir`), whether or not one
+    is there yet: the default `--expert_path` of its runs and `--out` of its `train_expert`.
+    ValueError for a task whose expert is known in closed form (the toy tasks)."""
+    spec = TASKS[env_name]
+    if spec.expert_dir is None:
+        raise ValueError(f"task {env_name!r} ships no saved expert (its expert is in closed form)")
+    return REPO_ROOT / spec.expert_dir
+
+
+def expert_path_for(cfg: Config) -> Path | None:
+    """The directory of the expert that runs of `cfg` ask: `cfg.expert_path`
+    (`resolve_expert_path`), else the expert shipped for the task (`task_expert_dir`); None for a
+    task whose expert is known in closed form (the toy tasks). ValueError, saying how to train one,
+    when the task has no shipped expert."""
+    from arld_jax.expert import META_FILE
+
+    if cfg.expert_path is not None:
+        return resolve_expert_path(cfg.expert_path)
+    if TASKS[cfg.env_name].target_action is not None:
+        return None
+    path = task_expert_dir(cfg.env_name)
+    if not (path / META_FILE).is_file():
+        raise ValueError(
+            f"no expert is shipped for task {cfg.env_name!r} (none at {path}), and a query "
+            "strategy other than 'none' needs one. Train one with plain SAC: `python -m "
+            f"arld_jax.run train_expert --env_name {cfg.env_name} --seeds 0,1,2,3,4 "
+            "--total_env_steps 300000 --replay_capacity 300000` (it saves the best seed's actor "
+            "there, where it becomes the task's default), or pass --expert_path DIR"
+        )
+    return path
 
 
 @dataclass(frozen=True)
@@ -231,7 +266,6 @@ def _cpu_arld_config() -> Config:
         budget=1_500,
         window_size=1_000,
         demo_steps=5,
-        expert_path=SHIPPED_EXPERT_PATH,
     )
 
 
@@ -258,7 +292,6 @@ def _default_config() -> Config:
         window_size=1_000,
         query_prob=0.1,
         t_query=0.1,
-        expert_path=SHIPPED_EXPERT_PATH,
     )
 
 
@@ -291,7 +324,7 @@ def preset_paper() -> Sweep:
     4 strategies x 2 uncertainties. Pruned (b only for Bernoulli, t_query only for active, C only
     where queries happen): 142 cells x 10 seeds = 1,420 runs instead of the 16,000 of the full
     cartesian grid. Narrow it with overrides, e.g. `--strategy active --t_query 0.05,0.1,0.2`."""
-    cfg = config_presets.paper(expert_path=SHIPPED_EXPERT_PATH)
+    cfg = config_presets.paper()
     sweep = _arld_cells(
         t_query=(0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7),
         query_prob=(0.1, 0.2, 0.3, 0.4, 0.5),
@@ -311,9 +344,7 @@ def _arld_100k_config() -> Config:
     expert/), so demonstrations have room to matter. b = 0.1 for both uncertainty measures (the paper's best b
     for Noisy SAC was 0.4; one b keeps BQSAC and BQNoisySAC spending alike). MJX, not 'auto':
     the committed runs (experiments/arld_100k, fig1_100k) used it and resume by their commands."""
-    return Config(
-        backend="mjx", replay_capacity=100_000, budget=2_500, expert_path=SHIPPED_EXPERT_PATH
-    )
+    return Config(backend="mjx", replay_capacity=100_000, budget=2_500)
 
 
 def preset_arld() -> Sweep:
@@ -344,7 +375,7 @@ def _arld_400k_config() -> Config:
       authors used for HalfCheetah and what our ablation chose, experiments/README.md);
     - 10 deterministic evaluation episodes per evaluation (A.1 does not say how many; `paper()`'s
       value), and a 5,000-step uniform-random warm-up (A.1 is silent; our default)."""
-    return config_presets.paper(backend="mujoco", expert_path=SHIPPED_EXPERT_PATH)
+    return config_presets.paper(backend="mujoco")
 
 
 def preset_arld_400k() -> Sweep:

@@ -1,5 +1,12 @@
-"""The env wrappers of the trainer: `limit_batch` chunks a vmapped env step without changing it;
-the 'mujoco' backend is Brax's halfcheetah stepped by MuJoCo's C engine."""
+"""The tasks and their physics: every Brax task gives the same observation, reward and termination on
+both backends (MJX, and MuJoCo's C engine behind a host callback) for the same state and action;
+`limit_batch` chunks a vmapped env step without changing it; the C step is a pure function.
+
+Each MJX check compiles one MJX step of the task (tens of seconds to minutes on CPU; the other
+checks compile no MJX at all). MJX's state is not made by its own reset (a second compile): the C
+engine's state is written into a zero MJX state of the right shapes, which is enough because MJX's
+step recomputes everything else from qpos, qvel and the warm start before it integrates.
+"""
 
 from __future__ import annotations
 
@@ -8,8 +15,139 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from arld_jax.config import Config
+from arld_jax.config import ENVS, Config
 from arld_jax.envs import limit_batch, make_env
+from arld_jax.physics import load_brax_env
+from arld_jax.tasks import BRAX_TASKS, REGISTRY
+
+slow = pytest.mark.slow  # compiles MuJoCo-MJX
+
+UNHEALTHY: dict[str, tuple[int, float]] = {
+    "hopper": (2, 0.5),  # pitched forward past 0.2 rad
+    "walker2d": (2, 1.5),  # pitched past 1 rad
+    "ant": (2, 1.5),  # torso above 1.0 (in the air)
+    "humanoid": (2, 2.5),  # torso above 2.0 (in the air)
+    "halfcheetah": (2, np.pi),  # on its back, which never ends an episode
+}
+"""Per task, a qpos entry and a value that make a state Brax's health rule calls a fall."""
+
+MJX_FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
+"""About a third off an MJX step's compile here; the test compares to float32 drift anyway."""
+
+
+def test_every_brax_task_has_a_module_and_checked_options():
+    """The four locomotion tasks are registered, and each C model carries MJX's options where
+    Brax changed them (Ant: Newton, 1 iteration, 4 line searches, Euler damping off), the XML's
+    float64 values elsewhere."""
+    from arld_jax.physics import _c_model
+
+    assert set(BRAX_TASKS) >= {"halfcheetah", "hopper", "walker2d", "ant"}
+    for name in BRAX_TASKS:
+        sys = load_brax_env(REGISTRY[name].brax_name, "mjx").sys
+        model = _c_model(sys)
+        for field in ("solver", "iterations", "ls_iterations", "disableflags", "cone"):
+            assert getattr(model.opt, field) == int(getattr(sys.opt, field)), (name, field)
+        for field in ("timestep", "tolerance", "impratio", "gravity"):
+            np.testing.assert_allclose(
+                getattr(model.opt, field), getattr(sys.opt, field), rtol=1e-6, err_msg=field
+            )
+        assert model.opt.timestep == sys.mj_model.opt.timestep  # float64, not float32's
+    ant = _c_model(load_brax_env("ant", "mjx").sys)
+    assert (ant.opt.iterations, ant.opt.ls_iterations) == (1, 4)
+
+
+def test_a_wrong_task_name_is_refused_with_the_task_list():
+    """`Config.env_name`'s choices are the task modules (a new task is one module)."""
+    assert tuple(REGISTRY) == ENVS
+    with pytest.raises(ValueError, match="env_name = 'cheetah' is invalid: allowed one of") as info:
+        Config(env_name="cheetah")
+    for name in ("'halfcheetah'", "'hopper'", "'walker2d'", "'ant'", "'toy_fall'"):
+        assert name in str(info.value)
+
+
+def _c_state_after(env, key, steps: int, n: int = 2):
+    """A C-engine state of `n` envs reached by `steps` uniform-random steps from a reset."""
+    state = jax.jit(env.reset, static_argnums=1)(key, n)
+    step = jax.jit(env.step)
+    for k in jax.random.split(jax.random.fold_in(key, 1), steps):
+        state = step(state, jax.random.uniform(k, (n, env.action_dim), minval=-1.0, maxval=1.0))
+    return state
+
+
+def _as_mjx_state(mjx_env, c_state):
+    """MJX's EnvState holding the C state's physics (qpos, qvel, warm start, bodies' frames)."""
+    n = c_state.obs.shape[0]
+    template = jax.eval_shape(lambda k: mjx_env.reset(k, n), jax.random.key(0))
+    zeros = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), template)
+    host = c_state.inner.pipeline_state
+    physics = zeros.inner.pipeline_state.replace(
+        qpos=host.q,
+        qvel=host.qd,
+        qacc_warmstart=host.qacc_warmstart,
+        q=host.q,
+        qd=host.qd,
+        x=host.x,
+    )
+    inner = zeros.inner.replace(pipeline_state=physics, obs=c_state.obs)
+    return zeros.replace(inner=inner, obs=c_state.obs)
+
+
+@slow
+@pytest.mark.parametrize("task", BRAX_TASKS)
+def test_both_backends_give_the_same_step(task):
+    """From the same state (reached by a few random C steps: bodies moving, feet on the ground)
+    and the same action, one step of each backend gives the same observation and reward to float32
+    drift and the same termination: 0 on that healthy state, and on a constructed unhealthy one
+    (`UNHEALTHY`) 1 for a task that can fall, 0 for HalfCheetah. Compiles one MJX step."""
+    c = make_env(Config(env_name=task, backend="mujoco"))
+    mjx = make_env(Config(env_name=task, backend="mjx"))
+    assert (c.obs_dim, c.action_dim, c.can_terminate) == (
+        mjx.obs_dim,
+        mjx.action_dim,
+        mjx.can_terminate,
+    )
+    assert c.can_terminate == REGISTRY[task].can_terminate == (task != "halfcheetah")
+    healthy = _c_state_after(c, jax.random.key(3), steps=3)
+    index, value = UNHEALTHY[task]
+    host = healthy.inner.pipeline_state
+    fallen_q = host.q.at[:, index].set(value)
+    fallen = healthy.replace(inner=healthy.inner.replace(pipeline_state=host.replace(q=fallen_q)))
+    action = jax.random.uniform(jax.random.key(4), (2, c.action_dim), minval=-1.0, maxval=1.0)
+    step_c = jax.jit(c.step)
+    step_m = jax.jit(mjx.step, compiler_options=MJX_FAST_COMPILE)
+    for name, state, fell in (("healthy", healthy, 0.0), ("unhealthy", fallen, 1.0)):
+        sc = step_c(state, action)
+        sm = step_m(_as_mjx_state(mjx, state), action)
+        np.testing.assert_allclose(sc.obs, sm.obs, rtol=1e-4, atol=5e-4, err_msg=name)
+        np.testing.assert_allclose(sc.reward, sm.reward, rtol=1e-4, atol=5e-4, err_msg=name)
+        expected = fell if c.can_terminate else 0.0
+        np.testing.assert_array_equal(sc.terminated, [expected] * 2, err_msg=name)
+        np.testing.assert_array_equal(sm.terminated, [expected] * 2, err_msg=name)
+        assert float(jnp.max(jnp.abs(sc.obs - state.obs))) > 1e-3  # it moved
+    assert float(jnp.max(jnp.abs(sc.obs - sm.obs))) > 0  # two engines, not one
+
+
+@pytest.mark.parametrize("task", ["halfcheetah", "hopper", "walker2d", "ant"])
+def test_c_engine_reward_is_brax_formula(task):
+    """On the C engine, Brax's reward from the host's frames: forward velocity of the torso
+    (x' - x) / dt, plus 1 per step alive for the tasks that can fall, minus the control cost
+    (weights from brax/envs/*.py: HalfCheetah 0.1, Hopper and Walker2d 0.001, Ant 0.5); and the
+    frames' torso x moves as qpos's root x does where the root is a slide along x."""
+    env = make_env(Config(env_name=task, backend="mujoco"))
+    brax_env = load_brax_env(REGISTRY[task].brax_name, "mjx")
+    state = _c_state_after(env, jax.random.key(5), steps=2, n=4)
+    action = jnp.linspace(-1.0, 1.0, 4 * env.action_dim).reshape(4, env.action_dim)
+    nxt = jax.jit(env.step)(state, action)
+    x0, x1 = (s.inner.pipeline_state.x.pos[:, 0, 0] for s in (state, nxt))
+    velocity = (x1 - x0) / float(brax_env.dt)
+    ctrl = {"halfcheetah": 0.1, "hopper": 1e-3, "walker2d": 1e-3, "ant": 0.5}[task]
+    alive = 1.0 if env.can_terminate else 0.0
+    expected = velocity + alive - ctrl * jnp.sum(action**2, axis=-1)
+    np.testing.assert_allclose(nxt.reward, expected, rtol=1e-4, atol=1e-4)
+    assert float(jnp.max(jnp.abs(velocity))) > 0.01  # the torso moved: the velocity term was tested
+
+
+# ---------------------------------------------------------------- batching
 
 
 def _states_and_actions(env, runs: int, envs: int):
@@ -60,6 +198,9 @@ def test_limited_step_runs_in_chunks():
     assert seen == [2]
 
 
+# ---------------------------------------------------------------- third-party notices
+
+
 def test_third_party_noise_is_dropped_and_everything_else_kept(capfd):
     """The filter works at the file-descriptor level (MuJoCo's C code writes there): known
     third-party notices are dropped, other lines come through, and after an error everything is
@@ -97,49 +238,12 @@ def test_building_halfcheetah_prints_no_third_party_noise(capfd):
     assert not [w for w in caught if "not actively being maintained" in str(w.message)]
 
 
-# ---------------------------------------------------------------- MuJoCo's C engine ('mujoco')
+# ---------------------------------------------------------------- the C step is pure
 
 
 @pytest.fixture(scope="module")
 def c_env():
     return make_env(Config(backend="mujoco"))
-
-
-def test_mujoco_backend_is_brax_halfcheetah_in_c():
-    """Same key: bit-identical initial states to the 'mjx' backend; the same actions for 10 steps:
-    the same observations and rewards to within float32 drift (the two engines differ only in
-    their arithmetic, float64 in C against float32 in MJX; over tens more steps the chaotic
-    trajectories part). MJX's reward is also worked out from its states: Brax's halfcheetah
-    (brax/envs/half_cheetah.py), r = 1.0 (x' - x) / dt - 0.1 sum(a^2), x the torso's x position
-    before and after the step, dt = 5 frames x the model's 0.01 s = 0.05 s. Compiles one MJX step
-    (about a minute on CPU)."""
-    from brax import envs as brax_envs
-
-    c, mjx = make_env(Config(backend="mujoco")), make_env(Config(backend="mjx"))
-    assert (c.obs_dim, c.action_dim) == (mjx.obs_dim, mjx.action_dim) == (17, 6)
-    torso = brax_envs.get_environment("halfcheetah", backend="mjx").sys.mj_model.body("torso").id
-    key = jax.random.key(3)
-    sc = jax.jit(c.reset, static_argnums=1)(key, 2)
-    sm = jax.jit(mjx.reset, static_argnums=1)(key, 2)
-    np.testing.assert_array_equal(sc.obs, sm.obs)
-    step_c, step_m = jax.jit(c.step), jax.jit(mjx.step)
-    actions = jax.random.uniform(jax.random.key(4), (10, 2, 6), minval=-1.0, maxval=1.0)
-    velocities = []
-    for t in range(10):
-        before = sm
-        sc, sm = step_c(sc, actions[t]), step_m(sm, actions[t])
-        np.testing.assert_allclose(sc.obs, sm.obs, atol=2e-3, err_msg=f"step {t}")
-        np.testing.assert_allclose(sc.reward, sm.reward, atol=2e-3, err_msg=f"step {t}")
-        x0, x1 = (np.asarray(s.inner.pipeline_state.xpos[:, torso, 0]) for s in (before, sm))
-        velocity = (x1 - x0) / 0.05
-        ctrl_cost = np.sum(np.square(np.asarray(actions[t])), axis=-1)
-        np.testing.assert_allclose(
-            sm.reward, velocity - 0.1 * ctrl_cost, rtol=1e-4, atol=1e-4, err_msg=f"step {t}"
-        )
-        velocities.append(velocity)
-    assert np.max(np.abs(velocities)) > 0.1  # the torso moved: the velocity term was tested
-    assert float(jnp.max(jnp.abs(sc.obs - sm.obs))) > 0  # two engines, not one
-    assert float(jnp.max(jnp.abs(sc.obs - c.reset(key, 2).obs))) > 0.1  # it moved
 
 
 def test_mujoco_step_is_a_pure_function_of_its_state(c_env):
@@ -163,15 +267,3 @@ def test_mujoco_step_is_a_pure_function_of_its_state(c_env):
     for out in pending:
         np.testing.assert_array_equal(out.obs, first.obs)
     assert not np.array_equal(first.obs, states.obs)
-
-
-def test_mujoco_reward_is_forward_velocity_minus_control_cost(c_env):
-    """r = (x' - x) / dt - 0.1 |a|^2 with x the torso's x: the reward of a step equals the change
-    in the carried x over Brax's dt (0.05 s) minus the control cost."""
-    state = c_env.reset(jax.random.key(5), 4)
-    action = jnp.linspace(-1.0, 1.0, 24).reshape(4, 6)
-    nxt = jax.jit(c_env.step)(state, action)
-    velocity = (nxt.inner.x - state.inner.x) / 0.05
-    expected = velocity - 0.1 * jnp.sum(action**2, axis=-1)
-    np.testing.assert_allclose(nxt.reward, expected, rtol=1e-4, atol=1e-4)
-    assert np.all(np.asarray(nxt.terminated) == 0)

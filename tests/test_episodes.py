@@ -10,9 +10,10 @@ import pytest
 
 from arld_jax import losses, query
 from arld_jax.config import hparams_from_config, tiny
-from arld_jax.envs import _TOY_W, TOY_FALL_ERROR, make_env, toy_target_action
+from arld_jax.envs import TOY_FALL_ERROR, make_env, toy_target_action
 from arld_jax.evaluate import rollout
 from arld_jax.expert import Expert
+from arld_jax.tasks.toy import _TOY_W
 from arld_jax.train import episode_ends, make_train
 
 LENGTH = 12  # a short time limit, so the run holds both kinds of episode end

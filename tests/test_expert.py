@@ -57,3 +57,77 @@ def test_parameters_that_do_not_match_the_metadata_are_refused(tmp_path):
     meta_file.write_text(json.dumps(meta | {"hidden_sizes": [16, 8]}))
     with pytest.raises(ValueError, match="does not match"):
         load_expert(tmp_path / "e", obs_dim=4, action_dim=2)
+
+
+# ---------------------------------------------------------------- the expert of a task
+
+
+def test_expert_of_another_task_is_refused_even_with_the_same_sizes(tmp_path):
+    """Walker2d's and HalfCheetah's observations and actions have the same sizes (17, 6): only
+    the recorded task tells their experts apart."""
+    from arld_jax.expert import check_expert_task
+
+    _, params, meta = _actor_and_params(obs_dim=17, action_dim=6)
+    save_expert(tmp_path / "e", params, meta | {"env_name": "walker2d"})
+    with pytest.raises(ValueError, match="acts in task 'walker2d', but this run's task is 'halfc"):
+        load_expert(tmp_path / "e", obs_dim=17, action_dim=6, env_name="halfcheetah")
+    assert load_expert(tmp_path / "e", 17, 6, env_name="walker2d").meta["env_name"] == "walker2d"
+    with pytest.raises(ValueError, match="train_expert --env_name hopper"):
+        check_expert_task({"env_name": "walker2d"}, tmp_path / "e", "hopper")
+
+
+def test_an_expert_without_a_recorded_task_is_halfcheetahs_if_it_has_17_observations():
+    from arld_jax.expert import check_expert_task, expert_task
+
+    assert expert_task({"obs_dim": 17, "action_dim": 6}) == "halfcheetah"
+    assert expert_task({"obs_dim": 4, "action_dim": 2}) is None  # unknown: sizes alone
+    assert expert_task({"env_name": "walker2d", "obs_dim": 17}) == "walker2d"
+    check_expert_task({"obs_dim": 17}, "old", "halfcheetah")
+    check_expert_task({"obs_dim": 4}, "old", "hopper")  # unknown task: the sizes' check decides
+    with pytest.raises(ValueError, match="acts in task 'halfcheetah'"):
+        check_expert_task({"obs_dim": 17}, "old", "walker2d")
+
+
+def test_the_default_expert_is_the_tasks_shipped_one(tmp_path, monkeypatch):
+    """`--expert_path` unset: HalfCheetah's runs ask experiments/expert, the toy tasks their
+    closed-form expert, and a task with nothing shipped is an error saying how to train one;
+    once an expert is saved in the task's directory, it is the default."""
+    from arld_jax import sweep
+    from arld_jax.config import Config
+
+    assert sweep.expert_path_for(Config()) == sweep.REPO_ROOT / "experiments" / "expert"
+    assert sweep.expert_path_for(Config(env_name="toy")) is None
+    given = Config(env_name="hopper", expert_path=str(tmp_path / "mine"))
+    assert sweep.expert_path_for(given) == tmp_path / "mine"
+    monkeypatch.setattr(sweep, "REPO_ROOT", tmp_path)  # a checkout with no hopper expert
+    with pytest.raises(ValueError, match="no expert is shipped for task 'hopper'") as info:
+        sweep.expert_path_for(Config(env_name="hopper"))
+    assert "train_expert --env_name hopper" in str(info.value)
+    _, params, meta = _actor_and_params(obs_dim=11, action_dim=3)
+    save_expert(tmp_path / "experiments" / "expert_hopper", params, meta | {"env_name": "hopper"})
+    assert sweep.expert_path_for(Config(env_name="hopper")) == (
+        tmp_path / "experiments" / "expert_hopper"
+    )
+
+
+def test_a_mismatched_expert_stops_a_sweep_before_anything_compiles(tmp_path, monkeypatch):
+    """The shipped HalfCheetah expert asked by a Walker2d sweep, a task without a shipped expert,
+    and an expert whose observation size differs: each a clear error, nothing written."""
+    from arld_jax import driver, sweep
+    from arld_jax.sweep import SHIPPED_EXPERT, Sweep, preset_tiny
+
+    def querying(**fields):
+        cfg = preset_tiny().cfg.replace(backend="mujoco", **fields)
+        return Sweep(cfg=cfg, sweep={"strategy": ("none", "active")}, seeds=(0,))
+
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit, match="acts in task 'halfcheetah'.*'walker2d'"):
+        driver.run_sweep(querying(env_name="walker2d", expert_path=str(SHIPPED_EXPERT)), out)
+    _, params, meta = _actor_and_params(obs_dim=4, action_dim=2)
+    save_expert(tmp_path / "old", params, {k: v for k, v in meta.items() if k != "env_name"})
+    with pytest.raises(SystemExit, match="obs_dim=4, action_dim=2.*task 'hopper' has obs_dim=11"):
+        driver.run_sweep(querying(env_name="hopper", expert_path=str(tmp_path / "old")), out)
+    monkeypatch.setattr(sweep, "REPO_ROOT", tmp_path)
+    with pytest.raises(SystemExit, match="no expert is shipped for task 'ant'"):
+        driver.run_sweep(querying(env_name="ant"), out)
+    assert not out.exists()

@@ -540,3 +540,34 @@ def test_cloned_expert_reproduces_the_recorded_actions(tmp_path: Path) -> None:
     assert err.mean() < 0.03 and err.max() < 0.15, (err.mean(), err.max())
     # An untrained actor of the same shape is far off (the test can fail).
     assert np.abs(actions).mean() > 0.3
+
+
+@pytest.mark.parametrize("task", ["hopper", "walker2d", "ant", "humanoid"])
+def test_every_brax_task_is_drawn_at_its_observed_pose(task) -> None:
+    """A state of the task (a C-engine reset, so Brax's own observation of it): the pose the page
+    draws is the state's qpos with the root's unobserved x (and y) at 0, the bodies are the
+    model's geoms there, and the knobs are named after the actuators' joints."""
+    from arld_jax.config import Config
+    from arld_jax.envs import make_env
+    from arld_jax.human.frames import action_names, body_segments, task_frame, task_model
+    from arld_jax.tasks import REGISTRY
+
+    model = task_model(task)
+    names = action_names(task)
+    assert len(names) == model.nu and all(names) and len(set(names)) == model.nu
+    if task in ("hopper", "walker2d"):
+        assert names[:3] == ["thigh", "leg", "foot"]
+    state = make_env(Config(env_name=task, backend="mujoco")).reset(jax.random.key(0), 1)
+    obs, qpos = np.asarray(state.obs[0]), np.asarray(state.inner.pipeline_state.q[0], np.float64)
+    pose, vx = REGISTRY[task].pose(obs, model)
+    skipped = 2 if task in ("ant", "humanoid") else 1
+    want = qpos.copy()
+    want[:skipped] = 0.0
+    np.testing.assert_allclose(pose, want, atol=1e-5)
+    assert vx == pytest.approx(float(state.inner.pipeline_state.qd[0, 0]), abs=1e-6)
+    frame = task_frame(task, obs)
+    assert frame["segments"] == body_segments(pose, model)
+    assert len(frame["segments"]) == model.ngeom - 1  # every body geom but the floor
+    assert frame["rootz"] == pytest.approx(float(state.inner.pipeline_state.x.pos[0, 0, 2]), 1e-4)
+    top = max(max(s["z1"], s["z2"]) for s in frame["segments"])
+    assert 0.3 < top < frame["top"]  # standing, inside the view

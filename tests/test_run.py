@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from arld_jax import cli, compare, driver, plots, run, rundir, summary
-from arld_jax.sweep import Sweep, SweepGroup, preset_tiny
+from arld_jax.sweep import SHIPPED_EXPERT, Sweep, SweepGroup, expert_path_for, preset_tiny
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -115,7 +115,7 @@ def test_arld_400k_preset_is_the_papers_protocol_with_figure_4s_cells():
     )
     assert cfg.num_eval_episodes >= 5 and cfg.backend == "mujoco" and cfg.demo_steps == 1
     assert (cfg.init_alpha, cfg.autotune_alpha, cfg.reward_scale) == (0.2, False, 5.0)
-    assert cfg.per_alpha > 0 and cfg.eps_demo > 0 and cfg.expert_path is not None
+    assert cfg.per_alpha > 0 and cfg.eps_demo > 0 and expert_path_for(cfg) == SHIPPED_EXPERT
     cells = [
         (c["strategy"], c.get("query_prob"), sweep.run_configs()[i * 5].t_query)
         for i, c in enumerate(sweep.cells())

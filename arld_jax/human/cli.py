@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import hashlib
 import json
 import logging
@@ -28,11 +29,11 @@ import jax
 import numpy as np
 
 from arld_jax import cli
-from arld_jax.config import STRATEGIES, Config
+from arld_jax.config import STRATEGIES, TASKS, Config
 from arld_jax.driver import ChunkHooks, RunOptions, enable_compilation_cache, run_sweep
 from arld_jax.envs import make_env
 from arld_jax.human.dataset import DATASET_FILE, DemoDataset
-from arld_jax.human.frames import halfcheetah_action_names, halfcheetah_frame
+from arld_jax.human.frames import action_names, task_frame
 from arld_jax.human.server import ServerThread, make_app
 from arld_jax.human.session import DemoSession, RunInfo
 from arld_jax.sweep import REPO_ROOT, SWEEP_PRESETS, Sweep
@@ -72,8 +73,8 @@ def human_config(**overrides: Any) -> Config:
 def run_info(cfg: Config) -> RunInfo:
     """What the page shows about `cfg`'s run."""
     env = make_env(cfg)
-    if cfg.env_name == "halfcheetah":
-        names = tuple(halfcheetah_action_names())
+    if TASKS[cfg.env_name].pose is not None:  # a Brax task: its actuators' names
+        names = tuple(action_names(cfg.env_name))
     else:
         names = tuple(f"a{i}" for i in range(env.action_dim))
     return RunInfo(
@@ -98,7 +99,9 @@ def open_session(cfg: Config, out: Path, log: Callable[..., None] = print) -> De
     header = {"env_name": info.env_name, "obs_dim": info.obs_dim, "action_dim": info.action_dim}
     header["action_names"] = list(info.action_names)
     dataset = DemoDataset(out / DATASET_FILE, header)
-    frame_fn = halfcheetah_frame if cfg.env_name == "halfcheetah" else None
+    frame_fn = None  # the toy tasks: the page shows the observation's numbers
+    if TASKS[cfg.env_name].pose is not None:
+        frame_fn = functools.partial(task_frame, cfg.env_name)
     return DemoSession(info, dataset, frame_fn=frame_fn, log=log)
 
 
@@ -237,7 +240,7 @@ def parse_args(argv: list[str], prog: str = PROG) -> tuple[argparse.Namespace, C
             f"error: a person demonstrates one run: give one value for {', '.join(sweep.sweep)}"
         )
     cfg = sweep.cfg
-    if args.preset != "human" and cfg.env_name == "halfcheetah" and "strategy" not in overrides:
+    if args.preset != "human" and TASKS[cfg.env_name].pose and "strategy" not in overrides:
         cfg = cfg.replace(strategy="active")
     check_single_run(cfg)
     return args, cfg

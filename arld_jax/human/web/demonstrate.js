@@ -139,14 +139,21 @@ function updatePreview() {
 
 const SVG_NS = "http://www.w3.org/2000/svg";
 function colour(name) {
-  if (name.startsWith("b")) return "#2a6fb0";
-  if (name.startsWith("f")) return "#d9822b";
+  if (run.env_name === "halfcheetah") {  // back and front legs
+    if (name.startsWith("b")) return "#2a6fb0";
+    if (name.startsWith("f")) return "#d9822b";
+  } else if (name.includes("left")) {
+    return "#2a6fb0";
+  } else if (name.includes("right")) {
+    return "#d9822b";
+  }
   return "#3b3b3b";
 }
 
-function cheetahSvg(frame) {
+function bodySvg(frame) {
+  const top = frame.top || 1.35;  // metres shown above the ground (HalfCheetah: 1.35)
   const svg = document.createElementNS(SVG_NS, "svg");
-  svg.setAttribute("viewBox", "-1.35 -1.35 2.7 1.6");  // x in [-1.35, 1.35], height z in [-0.25, 1.35]
+  svg.setAttribute("viewBox", `-1.35 ${-top} 2.7 ${top + 0.25}`);  // x in [-1.35, 1.35], z in [-0.25, top]
   svg.setAttribute("class", "frame-svg");
   const g = document.createElementNS(SVG_NS, "g");
   g.setAttribute("transform", "scale(1,-1)");  // z up
@@ -175,12 +182,12 @@ function renderFrames(p) {
   box.innerHTML = "";
   $("obs-view").innerHTML = "";
   const frames = p ? p.frames : [];
-  if (run.env_name === "halfcheetah") {
+  if (frames.length && frames[0].segments) {
     $("frames-title").textContent = `Last ${frames.length} state(s) of env ${p ? p.env : "-"}, oldest first (side view, centred on the torso)`;
     frames.forEach((f, j) => {
       const div = document.createElement("div");
       div.className = "frame" + (j === frames.length - 1 ? " now" : "");
-      div.appendChild(cheetahSvg(f));
+      div.appendChild(bodySvg(f));
       const label = document.createElement("div");
       const ago = frames.length - 1 - j;
       label.textContent = (ago === 0 ? "now" : `t-${ago}`) + ` (step ${f.env_step}, vx ${f.vx.toFixed(2)})`;
