@@ -333,7 +333,7 @@ def limit_batch(step: Callable[[EnvState, jax.Array], EnvState], max_batch: int)
 
 # Third-party messages that every run printed and no user can act on: MuJoCo-MJX's optional Warp
 # backend is not installed (printed at import), Brax's notice that its envs are unmaintained (we
-# keep Brax's tasks on purpose, see README), MuJoCo's deprecation of the `settotalmass`
+# keep Brax's tasks on purpose, docs/design.md), MuJoCo's deprecation of the `settotalmass`
 # attribute in Brax's half_cheetah.xml (printed by MuJoCo's C compiler).
 _THIRD_PARTY_NOISE = (
     "Failed to import warp",

@@ -13,7 +13,7 @@ Command line: ``python -m arld_jax.run plot RUN_DIR`` (summary and figures, also
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +26,6 @@ from matplotlib.ticker import EngFormatter
 
 from arld_jax.agents import REGISTRY
 from arld_jax.config import SHORT_NAMES, STRATEGIES, UNCERTAINTIES
-from arld_jax.config import cell_name as config_cell_name
 from arld_jax.rundir import (
     Cell,
     RunDir,
@@ -39,7 +38,7 @@ from arld_jax.rundir import (
     swept_fields,
 )
 from arld_jax.stats import mean_ci95, mean_ci95_columns
-from arld_jax.summary import has_falls
+from arld_jax.summary import cell_name, has_falls
 
 DPI = 110
 SMOOTH_WINDOW = 5
@@ -113,18 +112,6 @@ def _queries(run: Run, cell: Cell) -> bool:
 def uncertainty_title(run: Run, uncertainty: str | None, default: str) -> str:
     """What u(s) is for the run's agent family under this uncertainty measure (a panel's title)."""
     return REGISTRY[run.agent].uncertainty_titles.get(uncertainty or "", default)
-
-
-def cell_name(run: Run, cell: Cell, exclude: Sequence[str] = ()) -> str:
-    """Short legend label in the paper's names, e.g. "AQSAC t_query=0.1", "BQNoisySAC b=0.4 C=2"
-    (`config.cell_name`: every swept field the cell's strategy uses, so it tells the cells apart as
-    the cell_label does); ``exclude`` drops fields a panel already fixes."""
-    if _field(run, cell, "strategy") is None:
-        return cell.cell_label or f"cell {cell.cell}"
-    swept = swept_fields(run)
-    names = {"strategy", "uncertainty", "query_prob", "t_query", *swept}
-    values = {name: _field(run, cell, name) for name in names}
-    return config_cell_name(values, swept, run.agent, exclude)
 
 
 def _colors(n: int) -> list[Any]:

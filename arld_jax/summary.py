@@ -9,16 +9,18 @@ from __future__ import annotations
 import csv
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from arld_jax import gait
+from arld_jax import config, gait
 from arld_jax.rundir import (
     GROUP_FILE,
     SUMMARY_CSV,
     SUMMARY_MD,
+    Cell,
     RunDir,
     as_run,
     env_steps_axis,
@@ -52,6 +54,19 @@ STAT_COLUMNS: tuple[str, ...] = (
     "env_steps",
 )
 """Columns of a summary row after ``cell``, ``cell_label`` and the swept fields."""
+
+
+def cell_name(run: RunDir, cell: Cell, exclude: Sequence[str] = ()) -> str:
+    """A cell's short name in the paper's names, e.g. "AQSAC t_query=0.1", "BQNoisySAC b=0.4 C=2"
+    (`config.cell_name`: every swept field the cell's strategy uses, so it tells the cells apart as
+    the cell_label does), for legends, tables and progress lines; ``exclude`` drops fields a figure
+    panel already fixes."""
+    if run_field(run, cell.runs[0], "strategy") is None:
+        return cell.cell_label or f"cell {cell.cell}"
+    swept = swept_fields(run)
+    names = {"strategy", "uncertainty", "query_prob", "t_query", *swept}
+    values = {name: run_field(run, cell.runs[0], name) for name in names}
+    return config.cell_name(values, swept, run.agent, exclude)
 
 
 def episodes_late(run: RunDir) -> tuple[np.ndarray, np.ndarray]:
@@ -114,7 +129,7 @@ def upside_down_late(run: RunDir) -> tuple[np.ndarray, str]:
 def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
     """One row per cell, in cell order, over the evaluation periods present.
 
-    Row keys: ``cell``, ``cell_label``, the swept fields' values, then `STAT_COLUMNS`:
+    Row keys: ``cell``, ``cell_label``, ``name`` (`cell_name`: the paper's names), the swept fields' values, then `STAT_COLUMNS`:
     n_seeds; final_return_mean/ci95 (eval return at the last evaluation present); auc_mean/ci95
     (`area_under_curve`); demos_used_mean/ci95 (final cumulative demonstrations); expert_return
     (config.json, or nan); env_steps_per_second (timing.json, all runs together, or nan); periods
@@ -143,7 +158,11 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
             if demos is not None and periods
             else np.full(idx.size, np.nan)
         )
-        row: dict[str, Any] = {"cell": cell.cell, "cell_label": cell.cell_label}
+        row: dict[str, Any] = {
+            "cell": cell.cell,
+            "cell_label": cell.cell_label,
+            "name": cell_name(run, cell),
+        }
         for name in fields:
             row[name] = run_field(run, cell.runs[0], name)
         row["n_seeds"] = int(idx.size)
@@ -295,7 +314,7 @@ def write_summary(run_dir: str | Path) -> tuple[Path, Path]:
     into the run directory and return their paths."""
     run = load_run(run_dir)
     rows = summarize(run)
-    columns = ["cell", "cell_label", *swept_fields(run), *STAT_COLUMNS]
+    columns = ["cell", "cell_label", "name", *swept_fields(run), *STAT_COLUMNS]
     csv_path = run.path / SUMMARY_CSV
     with csv_path.open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=columns)
@@ -306,7 +325,7 @@ def write_summary(run_dir: str | Path) -> tuple[Path, Path]:
     return csv_path, md_path
 
 
-GROUP_COLUMNS: tuple[str, ...] = ("member", "agent", "cell", "cell_label", *STAT_COLUMNS)
+GROUP_COLUMNS: tuple[str, ...] = ("member", "agent", "cell", "cell_label", "name", *STAT_COLUMNS)
 """Columns of a group summary row (`write_group_summary`)."""
 
 
@@ -347,7 +366,7 @@ def write_group_summary(group_dir: str | Path) -> tuple[Path, Path]:
     ]
     for row in rows:
         lines.append(
-            f"| {row['agent']} | {row['cell_label'] or '-'} | {row['n_seeds']} | "
+            f"| {row['agent']} | {row['name']} | {row['n_seeds']} | "
             f"{format_mean_ci(row['final_return_mean'], row['final_return_ci95'])} | "
             f"{format_mean_ci(row['auc_mean'], row['auc_ci95'])} | "
             f"{format_mean_ci(row['demos_used_mean'], row['demos_used_ci95'])} | "

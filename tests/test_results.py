@@ -228,6 +228,7 @@ def test_write_summary_csv_schema_and_markdown(run_dir: Path) -> None:
     assert reader.fieldnames == [
         "cell",
         "cell_label",
+        "name",
         "strategy",
         "n_seeds",
         "final_return_mean",

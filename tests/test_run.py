@@ -531,16 +531,16 @@ def test_agent_list_is_a_group_of_programs_with_one_summary(tmp_path, capsys):
     options = driver.RunOptions(plots=False, command="python -m arld_jax.run " + " ".join(argv))
     assert driver.run_group(group, out, options)
     rows = summary.summarize_group(out)
-    assert [(r["agent"], r["cell_label"]) for r in rows] == [
-        ("sac", "strategy=none"),
-        ("sac", "strategy=greedy"),
-        ("td3", "strategy=none"),
-        ("td3", "strategy=greedy"),
+    assert [(r["agent"], r["cell_label"], r["name"]) for r in rows] == [
+        ("sac", "strategy=none", "SAC"),
+        ("sac", "strategy=greedy", "GQSAC"),
+        ("td3", "strategy=none", "TD3"),
+        ("td3", "strategy=greedy", "GQTD3"),
     ]
     assert all(r["env_steps"] == 1000 for r in rows)
     assert [r["demos_used_mean"] for r in rows] == [0, group.members[0][1].cfg.budget] * 2
     md = (out / "summary.md").read_text()
-    assert "| td3 | strategy=greedy |" in md
+    assert "| td3 | GQTD3 |" in md  # the paper's names of the family that ran
     capsys.readouterr()
     assert driver.run_group(group, out, options)  # nothing left to train
     assert capsys.readouterr().out.count(": complete") == 2
