@@ -142,9 +142,9 @@ class Config(*AGENT_OPTIONS):
     # ---- environment (static) ----
     env_name: str = "halfcheetah"
     """The task, one of `ENVS` (a module each in `arld_jax.tasks`): Brax's 'halfcheetah' (never
-    falls), 'hopper', 'walker2d', 'ant' (a fall ends the episode), or the cheap pure-JAX stand-ins
-    of the tests: 'toy' (never ends early) and 'toy_fall' (ends when the action strays far from
-    the target)."""
+    falls), 'hopper', 'walker2d', 'ant', 'humanoid' (a fall ends the episode), or the cheap
+    pure-JAX stand-ins of the tests: 'toy' (never ends early) and 'toy_fall' (ends when the action
+    strays far from the target)."""
     backend: str = "auto"
     """Physics of a Brax task. 'auto' (the default) takes the fastest for the machine when the
     Config is built, so config.json names the physics that ran: 'mujoco' when jax computes on the

@@ -61,7 +61,9 @@ def pose_after_root_x(obs: np.ndarray, model: Any) -> tuple[np.ndarray, float]:
 
 def pose_with_height(obs: np.ndarray, model: Any) -> tuple[np.ndarray, float]:
     """Brax's planar observation with the torso's height in place of the root's z slide (Hopper,
-    Walker2d): the slide is the height less the torso's height at qpos0."""
+    Walker2d): the slide is the height less the torso's height at qpos0. (Brax observes the height
+    as of the step's last physics frame's start, so after a step the drawn height lags by one
+    frame, 2 ms of motion.)"""
     k = model.nq - 1
     qpos = np.concatenate([[0.0], obs[:k]])
     qpos[1] = obs[0] - model.body_pos[1, 2]
