@@ -138,5 +138,5 @@ def test_evaluation_counts_the_upside_down_states(pitch0: float, rate: float, fl
     states it visits with the torso upside down, each state counted before its step."""
     policy = lambda obs: jnp.zeros((obs.shape[0], 6))  # noqa: E731
     env = _pitched_env(pitch0, rate)
-    _, fraction = evaluate_policy(env, policy, jax.random.key(0), 2, 40)
+    fraction = evaluate_policy(env, policy, jax.random.key(0), 2, 40).upside_down
     assert float(fraction) == pytest.approx(flipped, abs=1e-6)

@@ -501,13 +501,13 @@ def test_export_expert_from_a_run_acts_like_its_best_actor(uninterrupted, tmp_pa
     assert meta["train_env_steps"] == sweep.cfg.total_env_steps
     env = make_env(sweep.cfg)
     expert = load_expert(tmp_path / "expert", env.obs_dim, env.action_dim)
-    ret, _ = evaluate_policy(
+    ret = evaluate_policy(
         env,
         lambda obs: expert.act(expert.params, obs, jax.random.key(0)),
         jax.random.key(11),
         20,
         sweep.cfg.episode_length,
-    )
+    ).episode_return
     # The exported actor is the trained one: far above an untrained policy (~20 on this toy env).
     assert float(ret) > 0.85 * sweep.cfg.episode_length
 

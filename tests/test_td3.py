@@ -485,7 +485,7 @@ def _per_head_returns(cfg: config.Config, actor_params) -> np.ndarray:  # noqa: 
         policy = lambda obs: jnp.tanh(actor.apply(params, obs))[:, k]  # noqa: E731
         return evaluate_policy(
             env, policy, jax.random.key(9), cfg.num_eval_episodes, cfg.episode_length
-        )[0]
+        ).episode_return
 
     heads = jnp.arange(cfg.boot_heads)
     return np.asarray(jax.jit(jax.vmap(jax.vmap(one, (None, 0)), (0, None)))(actor_params, heads))
