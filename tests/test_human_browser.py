@@ -121,6 +121,7 @@ def demo_items(state) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
 @pytest.mark.slow
 def test_halfcheetah_page_end_to_end(browser, tmp_path: Path) -> None:  # noqa: ANN001
     cfg = Config(
+        backend="mjx",  # the frames are checked against MJX's own geom positions below
         num_envs=1,
         episode_length=100,
         total_env_steps=200,
