@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 
 from arld_jax.envs import Env
+from arld_jax.tasks.base import select_envs
 from arld_jax.types import PRNGKey
 
 
@@ -41,11 +42,7 @@ def rollout(
         nxt = env.step(state, policy_fn(state.obs))
         reward = jnp.where(alive, nxt.reward, 0.0)
         if env.can_terminate:
-            nxt = jax.tree.map(
-                lambda n, s: jnp.where(alive.reshape(alive.shape + (1,) * (s.ndim - 1)), n, s),
-                nxt,
-                state,
-            )
+            nxt = select_envs(alive, nxt, state)
             ended = alive & (nxt.terminated > 0)
         else:
             ended = jnp.zeros_like(alive)

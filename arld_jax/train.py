@@ -34,6 +34,7 @@ from arld_jax.envs import EnvState, make_env
 from arld_jax.evaluate import Evaluation, evaluate_policy
 from arld_jax.expert import Expert, ExpertContext
 from arld_jax.replay import ReplayState, make_prioritized_replay, priority_from_td
+from arld_jax.tasks.base import select_envs
 from arld_jax.types import PRNGKey, Transition, example_transition
 
 
@@ -132,13 +133,8 @@ def episode_ends(
 
 
 def reset_where(done: jax.Array, fresh: EnvState, current: EnvState) -> EnvState:
-    """`fresh` for the envs whose episode ended (`done` [E]), `current` for the others, leaf by leaf
-    (every leaf of an EnvState leads with the env axis)."""
-
-    def pick(f: jax.Array, c: jax.Array) -> jax.Array:
-        return jnp.where(done.reshape(done.shape + (1,) * (c.ndim - 1)), f, c)
-
-    return jax.tree.map(pick, fresh, current)
+    """`fresh` for the envs whose episode ended (`done` [E]), `current` for the others."""
+    return select_envs(done, fresh, current)
 
 
 @flax.struct.dataclass

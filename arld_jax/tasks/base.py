@@ -42,6 +42,15 @@ class Env(NamedTuple):
     can_terminate: bool = False  # static: whether `step` can ever set `terminated` (a fall)
 
 
+def select_envs(mask: jax.Array, a: Any, b: Any) -> Any:
+    """`a` for the envs where `mask` [E] is set, `b` for the others, leaf by leaf (every leaf of an
+    EnvState leads with the env axis): a fresh state for envs that ended, a frozen one for ended
+    evaluation episodes."""
+    return jax.tree.map(
+        lambda x, y: jnp.where(mask.reshape(mask.shape + (1,) * (y.ndim - 1)), x, y), a, b
+    )
+
+
 def never_upside_down(obs: jax.Array) -> jax.Array:
     """Tasks without HalfCheetah's gait rule: never upside down."""
     return jnp.zeros(obs.shape[:-1], bool)
