@@ -44,14 +44,16 @@ class Expert(NamedTuple):
 
     A row of NaNs from `act` hands that env's query back to the agent: the step is the agent's
     (not a demonstration), the rest of the query is cancelled and its budget is not spent.
-    `observe(obs, context)`, if set, sees every iteration (a person's page shows the states before
-    a query; `arld_jax.human`); it must be an ordered host callback, so such an expert runs one run
-    at a time (no vmap)."""
+    `observe(obs, next_obs, fell, context)`, if set, sees every iteration after its env step: the
+    states acted in, the states reached (true next observations, before any reset) and which envs
+    fell there, ending their episodes (a person's page shows the states before a query and each
+    fall; `arld_jax.human`). It must be an ordered host callback, so such an expert runs one run at
+    a time (no vmap)."""
 
     params: Params
     act: Callable[[Params, jax.Array, PRNGKey, ExpertContext | None], jax.Array]
     meta: dict[str, Any]
-    observe: Callable[[jax.Array, ExpertContext], Any] | None = None
+    observe: Callable[[jax.Array, jax.Array, jax.Array, ExpertContext], Any] | None = None
 
 
 def toy_expert() -> Expert:

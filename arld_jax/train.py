@@ -303,8 +303,6 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
             budget=hp.budget,
             env_step=it * num_envs,
         )
-        if expert is not None and expert.observe is not None:
-            expert.observe(obs, context)  # a host side effect (a person's page): one run only
         expert_action = expert_act(obs, k_expert, context)
         # An expert may hand a query back: a row of NaNs (`query.hand_back`).
         declined = is_demo & jnp.any(jnp.isnan(expert_action), axis=-1)
@@ -314,6 +312,9 @@ def make_train(cfg: Config, expert: Expert | None = None) -> Trainer:
 
         with jax.named_scope("env_step"):  # named scopes label the ops in a profile (also
             next_env = env.step(state.env, action)  # replay_add/_sample/_priorities, in replay.py)
+        if expert is not None and expert.observe is not None:
+            # A host side effect (a person's page: the states, and the falls): one run only.
+            expert.observe(obs, next_env.obs, next_env.terminated > 0, context)
         transition = Transition(
             obs=obs,
             action=action,  # the executed action (the expert's on demonstrated steps)

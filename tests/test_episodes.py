@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from jax.experimental import io_callback
 
 from arld_jax import losses, query
 from arld_jax.config import hparams_from_config, tiny
@@ -56,15 +57,24 @@ def test_a_demonstration_run_ends_with_its_episode() -> None:
     assert int(free) == 10 - 2 - 3
 
 
-def _clumsy_expert() -> Expert:
+def _clumsy_expert(seen: list) -> Expert:
     """An expert that acts against the toy target half the time it is asked: it falls often, so
-    demonstration runs meet terminations."""
+    demonstration runs meet terminations. Its `observe` hook (a person's page uses it) appends
+    what every iteration shows it to `seen`: (env_step, obs, next_obs, fell)."""
 
     def act(p, obs, key, context=None):  # noqa: ANN001, ANN202
         sign = jnp.where(jax.random.uniform(key, obs.shape[:1]) < 0.5, -1.0, 1.0)
         return sign[:, None] * toy_target_action(obs)
 
-    return Expert(params={}, act=act, meta={"name": "clumsy"})
+    def observe(obs, next_obs, fell, context):  # noqa: ANN001, ANN202
+        def host(*args):  # noqa: ANN002, ANN202
+            seen.append(tuple(np.asarray(a) for a in args))
+            return np.int32(0)
+
+        shape = jax.ShapeDtypeStruct((), jnp.int32)
+        return io_callback(host, shape, context.env_step, obs, next_obs, fell, ordered=True)
+
+    return Expert(params={}, act=act, meta={"name": "clumsy"}, observe=observe)
 
 
 @pytest.fixture(scope="module")
@@ -84,11 +94,12 @@ def falling_run():
         demo_steps=C,
         budget=10_000,
     )
-    trainer = make_train(cfg, _clumsy_expert())
+    seen: list = []
+    trainer = make_train(cfg, _clumsy_expert(seen))
     state, metrics = jax.jit(trainer.train)(jax.random.key(3), hparams_from_config(cfg))
     data = jax.tree.map(np.asarray, state.replay.data)
     per_env = jax.tree.map(lambda x: x.reshape(-1, NUM_ENVS, *x.shape[1:]), data)  # [T, E, ...]
-    return cfg, state, jax.tree.map(np.asarray, metrics), per_env
+    return cfg, state, jax.tree.map(np.asarray, metrics), per_env, seen
 
 
 def _episodes(per_env, e: int) -> list[tuple[int, int]]:
@@ -107,7 +118,7 @@ def test_envs_end_and_restart_alone(falling_run) -> None:
     time limit) the env restarts from a fresh initial state (in [-1, 1]^4, not the stored next
     obs); each fall is stored with terminated = 1 and its reward shows the fall rule; a time-limit
     end has terminated = 0; and the two envs end at different steps."""
-    _, _, metrics, d = falling_run
+    _, _, metrics, d, _ = falling_run
     ends = {e: [end for _, end in _episodes(d, e)] for e in range(NUM_ENVS)}
     falls = truncations = 0
     for e in range(NUM_ENVS):
@@ -135,7 +146,7 @@ def test_a_demonstration_is_cut_by_a_fall(falling_run) -> None:
     episode is at most C long unless a new query followed at once, and the first step after a fall
     is the start of a new run (is_demo there is a fresh Bernoulli query, rare at b = 0.1), never the
     rest of the cut one. Every demonstrated step is counted in the budget, and nothing else."""
-    _, state, _, d = falling_run
+    _, state, _, d, _ = falling_run
     cut = continued = 0
     for e in range(NUM_ENVS):
         for start, end in _episodes(d, e):
@@ -150,6 +161,20 @@ def test_a_demonstration_is_cut_by_a_fall(falling_run) -> None:
     assert cut >= 3, cut
     assert continued <= cut // 3, (continued, cut)
     assert int(state.query.demos_used) == int(d.is_demo.sum())
+
+
+def test_the_expert_sees_every_step_and_every_fall(falling_run) -> None:
+    """The expert's `observe` hook (how a person's page sees the run) is called once per iteration,
+    in order, after the env step: with the states acted in, the true next states (the fallen
+    state at a fall, not the fresh one that replaces it) and the falls, exactly as the replay
+    stores them."""
+    _, _, _, d, seen = falling_run
+    steps, obs, next_obs, fell = (np.stack(x) for x in zip(*seen, strict=True))
+    np.testing.assert_array_equal(steps, NUM_ENVS * np.arange(d.obs.shape[0]))
+    np.testing.assert_array_equal(obs, d.obs)
+    np.testing.assert_array_equal(next_obs, d.next_obs)
+    np.testing.assert_array_equal(fell, d.terminated > 0)
+    assert fell.sum() > 10
 
 
 def test_evaluation_on_a_task_that_terminates() -> None:

@@ -7,6 +7,9 @@ the `playwright` package; no browser download).
    exactly the actions the page sent, and that the frames are the simulated bodies (MJX geom
    positions). Set ARLD_SCREENSHOT=docs/demonstrate.png to save the page during the last query.
 2. Toy env: a second tab is refused, takes over explicitly, and hands a query back.
+3. Hopper on MuJoCo's C engine (a task whose episodes end): the person drives it into a fall; the
+   page announces the fall and draws the fallen state, the demonstration ends with the episode,
+   and the next query starts in the new one.
 """
 
 from __future__ import annotations
@@ -285,3 +288,81 @@ def test_second_tab_and_hand_back_on_toy(browser, tmp_path: Path) -> None:  # no
     _, demo_action = demo_items(state)
     np.testing.assert_array_equal(demo_action, np.asarray([sent, *later], np.float32))
     np.testing.assert_allclose(later[0], records[2].agent_action, atol=1e-3)
+
+
+@pytest.mark.slow
+def test_hopper_fall_is_shown_and_ends_the_demonstration(browser, tmp_path: Path) -> None:  # noqa: ANN001
+    budget, c = 12, 10
+    cfg = Config(
+        env_name="hopper",
+        backend="mujoco",
+        num_envs=1,
+        episode_length=100,
+        total_env_steps=100,
+        learning_starts=50,
+        eval_every=50,
+        num_eval_episodes=1,
+        hidden_sizes=(32, 32),
+        batch_size=32,
+        replay_capacity=100,
+        window_size=10,
+        traces_per_eval=5,
+        state_sample_size=16,
+        strategy="greedy",
+        demo_steps=c,
+        budget=budget,
+    )
+    training = Training(cfg, tmp_path)
+    page = browser.new_page(viewport={"width": 1400, "height": 860})
+    page.goto(training.server.url)
+    wait_for_step(page, 0)
+    assert "hopper" in page.inner_text("#run-info")
+    assert page.locator("#frames svg line.capsule").count() == 4  # torso, thigh, leg, foot
+    assert page.inner_text("#fall-info") == ""
+    for i in range(3):  # every joint at full negative torque: Hopper falls within a few steps
+        page.focus(f"#knob-{i}")
+        page.keyboard.press("Home")
+    fell_at = 0
+    while True:
+        page.focus("#submit")
+        send(page, lambda: page.keyboard.press("Enter"))
+        fell_at += 1
+        wait_for_step(page, fell_at)
+        if page.inner_text("#fall-info"):
+            break
+        assert fell_at < c, "Hopper did not fall under full negative torque"
+    # The fall ended the episode and query 0 with it; query 1 starts in the fresh episode.
+    assert f"falls 1, the last at env step {fell_at} (env 0)" in page.inner_text("#fall-info")
+    assert f"fell at env step {fell_at}" in page.inner_text("#message")
+    assert "query 1, step 1 of" in page.inner_text("#step-info")
+    fallen = page.locator("#frames .frame.fell")
+    assert fallen.count() == 1 and "fell: episode ended" in fallen.inner_text()
+    fallen_frame = page.evaluate(
+        "[...document.querySelectorAll('#frames .fell line.capsule')].map(l => "
+        "[+l.getAttribute('x1'), +l.getAttribute('y1'), +l.getAttribute('x2'), "
+        "+l.getAttribute('y2')])"
+    )
+    page.click("#zero")  # gentle from here on: the rest of the budget in the new episode
+    for step in range(fell_at, budget):
+        wait_for_step(page, step)
+        send(page, lambda: page.click("#submit"))
+    page.close()
+    state = training.finish()["state"]
+
+    _, records = read_dataset(tmp_path / "demonstrations.jsonl")
+    assert [(r.query, r.k, r.c, r.env_step) for r in records] == [
+        *((0, k + 1, c, k) for k in range(fell_at)),
+        *((1, k + 1, budget - fell_at, fell_at + k) for k in range(budget - fell_at)),
+    ]
+    # The replay: the last step of query 0 is the fall, stored as terminated; the page drew the
+    # state Hopper fell into (the true next observation of that step).
+    data = jax.tree.map(lambda x: np.asarray(x)[:budget], state.replay.data)
+    assert np.all(data.is_demo == 1.0)
+    np.testing.assert_array_equal(np.flatnonzero(data.terminated > 0), [fell_at - 1])
+
+    from arld_jax.human.frames import task_frame
+
+    drawn = task_frame("hopper", data.next_obs[fell_at - 1])["segments"]
+    np.testing.assert_allclose(
+        fallen_frame, [[s["x1"], s["z1"], s["x2"], s["z2"]] for s in drawn], atol=1e-5
+    )

@@ -291,6 +291,29 @@ def test_hand_back_gives_the_rest_of_the_query_to_the_agent(setup, tmp_path: Pat
     ]
 
 
+def test_a_fall_is_shown_before_the_next_query(setup) -> None:  # noqa: ANN001
+    """The loop's `observe` after each env step: the state an env fell into is kept as a frame
+    marked `fell`, before the fresh state of its next episode, and the page's state counts the
+    falls and names the last one."""
+    session, client, token = setup
+    state = lambda: client.get("/api/state", headers={TOKEN_HEADER: token}).json()  # noqa: E731
+    obs = lambda v: np.asarray([[v, -v]], np.float32)  # noqa: E731
+    session.observe(obs(0.1), obs(0.2), np.asarray([False]), np.int32(0))
+    assert (state()["falls"], state()["last_fall"]) == (0, None)
+    session.observe(obs(0.2), obs(0.9), np.asarray([True]), np.int32(1))  # fell into 0.9 at step 2
+    assert (state()["falls"], state()["last_fall"]) == (1, {"env": 0, "env_step": 2})
+    loop = Loop(session, env_step=2, obs=(0.4, -0.4))  # a query on the fresh state at step 2
+    frames = wait_pending(client, token, 2)["pending"]["frames"]
+    assert [(f["env_step"], f["obs"][0], f["fell"]) for f in frames] == [
+        (0, pytest.approx(0.1), False),
+        (1, pytest.approx(0.2), False),
+        (2, pytest.approx(0.9), True),
+        (2, pytest.approx(0.4), False),
+    ]
+    post(client, "/api/action", token, {"step_id": 2, "action": [0, 0, 0]})
+    loop.join()
+
+
 def test_pause_holds_the_loop_after_the_answer(setup) -> None:  # noqa: ANN001
     session, client, token = setup
     assert post(client, "/api/pause", token, {"paused": "no"}).status_code == 422

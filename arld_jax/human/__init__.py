@@ -24,8 +24,9 @@ recorded set into a saved expert for `--expert_path`), `dataset`, `frames`, `cli
 line; `cli.run_with_person` trains a run with the person at a `cli.open_session`). This package
 imports none of them, so `dataset` and `session` (numpy only) load without JAX.
 
-Every iteration reaches the page through the expert's `observe` hook (`make_observer`), so the
-frames before a query's first step are the states the agent just visited, and a pause holds the run
-at the next iteration. A hand-back answers with a row of NaNs: the loop cancels the rest of the
+Every iteration reaches the page through the expert's `observe` hook (`make_observer`), after its
+env step, so the frames before a query's first step are the states the agent just visited, a fall
+(on tasks whose episodes end, e.g. Hopper) is shown as the state the body fell into, and a pause
+holds the run at the next iteration. A hand-back answers with a row of NaNs: the loop cancels the rest of the
 query, returns its budget and stores those steps as the agent's (not is_demo).
 """

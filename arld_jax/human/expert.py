@@ -54,15 +54,22 @@ def make_human_expert(session: DemoSession) -> Expert:
     return Expert(params={}, act=act, meta=meta, observe=make_observer(session))
 
 
-def make_observer(session: DemoSession) -> Callable[[jax.Array, ExpertContext], jax.Array]:
-    """observe(obs, context): hands every iteration's states to the session (the frames before a
-    query, and pausing between queries). For the per-iteration hook requested of train.py."""
+def make_observer(
+    session: DemoSession,
+) -> Callable[[jax.Array, jax.Array, jax.Array, ExpertContext], jax.Array]:
+    """observe(obs, next_obs, fell, context): hands every iteration's states, and the states where
+    an env fell, to the session (the frames before a query, the falls, and pausing between
+    queries). The loop's per-iteration hook (`Expert.observe`)."""
 
-    def observe(obs: jax.Array, context: ExpertContext) -> jax.Array:
+    def observe(
+        obs: jax.Array, next_obs: jax.Array, fell: jax.Array, context: ExpertContext
+    ) -> jax.Array:
         return io_callback(
             session.observe,
             jax.ShapeDtypeStruct((), jnp.int32),
             obs,
+            next_obs,
+            fell,
             context.env_step,
             ordered=True,
         )

@@ -207,7 +207,8 @@ class DemoSession:
         self._runs: dict[int, tuple[int, int]] = {}  # env -> (query, c) of its current run
         self._known = latest_by_key(dataset.records)
         self._next_query = 1 + max((r.query for r in dataset.records), default=-1)
-        self._history: dict[int, deque[tuple[int, np.ndarray]]] = {}
+        self._history: dict[int, deque[tuple[int, np.ndarray, bool]]] = {}  # (step, obs, fell)
+        self._falls: list[dict[str, int]] = []  # {"env", "env_step"} of each fall, in order
         self._history_len = history
         self._last_submitted: list[float] | None = None
         self.counts = {"asked": 0, "replayed": 0, "handed_back": 0}
@@ -269,12 +270,21 @@ class DemoSession:
             self.wait_while_paused()
         return out
 
-    def observe(self, obs: Any, env_step: Any) -> np.int32:
-        """Remember every env's state (the frames before a query) and hold while paused. For a
-        per-iteration hook of the loop (see the package docstring); returns a dummy int32."""
-        obs = np.asarray(obs, np.float32)
-        for e in range(obs.shape[0]):
-            self._remember(e, int(env_step), obs[e])
+    def observe(self, obs: Any, next_obs: Any, fell: Any, env_step: Any) -> np.int32:
+        """After an iteration's env step: remember every env's state (the frames before a query),
+        and for each env that fell, the state it fell into, shown as the end of its episode (the
+        env restarts from a fresh state). Then hold while paused. The loop's per-iteration hook
+        (see the package docstring); returns a dummy int32."""
+        obs, next_obs = np.asarray(obs, np.float32), np.asarray(next_obs, np.float32)
+        step, num_envs = int(env_step), obs.shape[0]
+        for e in range(num_envs):
+            self._remember(e, step, obs[e])
+        for e in np.flatnonzero(np.asarray(fell, bool)):
+            e, fell_at = int(e), step + num_envs  # the fallen state: where the next step would act
+            self._remember(e, fell_at, next_obs[e], fell=True)
+            with self._cv:
+                self._falls.append({"env": e, "env_step": fell_at})
+            self.log(f"env {e} fell at env step {fell_at}: its episode ended, a new one begins")
         self.wait_while_paused()
         return np.int32(0)
 
@@ -300,18 +310,20 @@ class DemoSession:
         mine = [r for r in self._known.values() if r.env == env]
         return max(mine, key=lambda r: r.env_step) if mine else None
 
-    def _remember(self, env: int, env_step: int, obs: np.ndarray) -> None:
+    def _remember(self, env: int, env_step: int, obs: np.ndarray, fell: bool = False) -> None:
+        """Append env `env`'s state at `env_step` once. A fallen state and the fresh state that
+        replaces it share their env step: both are kept, the fall first."""
         with self._cv:
             hist = self._history.setdefault(env, deque(maxlen=self._history_len))
-            if not hist or hist[-1][0] != env_step:
-                hist.append((env_step, np.array(obs, np.float32)))
+            if not hist or hist[-1][0] != env_step or hist[-1][2] != fell:
+                hist.append((env_step, np.array(obs, np.float32), fell))
 
     def _frames(self, env: int) -> list[dict[str, Any]]:
         with self._cv:
             hist = list(self._history.get(env, ()))
         frames = []
-        for step, obs in hist:
-            frame: dict[str, Any] = {"env_step": step, "obs": _as_list(obs)}
+        for step, obs, fell in hist:
+            frame: dict[str, Any] = {"env_step": step, "obs": _as_list(obs), "fell": fell}
             if self.frame_fn is not None:
                 frame |= self.frame_fn(obs)
             frames.append(frame)
@@ -450,6 +462,8 @@ class DemoSession:
                 "pending": pending,
                 "recorded": len(self.dataset.records),
                 "last_submitted": self._last_submitted,
+                "falls": len(self._falls),
+                "last_fall": self._falls[-1] if self._falls else None,
             }
 
     def _pending_step(self, step_id: int, what: str) -> PendingStep:

@@ -11,6 +11,7 @@ let pending = null;      // the pending step shown, or null
 let lastSent = null;     // the last action this page sent (for smoothing)
 let polling = null;
 let sending = false;
+let fallsSeen = 0;        // falls already announced
 
 const $ = (id) => document.getElementById(id);
 const round6 = (v) => Math.round(v * 1e6) / 1e6;
@@ -186,11 +187,12 @@ function renderFrames(p) {
     $("frames-title").textContent = `Last ${frames.length} state(s) of env ${p ? p.env : "-"}, oldest first (side view, centred on the torso)`;
     frames.forEach((f, j) => {
       const div = document.createElement("div");
-      div.className = "frame" + (j === frames.length - 1 ? " now" : "");
+      div.className = "frame" + (j === frames.length - 1 ? " now" : "") + (f.fell ? " fell" : "");
       div.appendChild(bodySvg(f));
       const label = document.createElement("div");
       const ago = frames.length - 1 - j;
-      label.textContent = (ago === 0 ? "now" : `t-${ago}`) + ` (step ${f.env_step}, vx ${f.vx.toFixed(2)})`;
+      const when = f.fell ? "fell: episode ended" : (ago === 0 ? "now" : `t-${ago}`);
+      label.textContent = when + ` (step ${f.env_step}, vx ${f.vx.toFixed(2)})`;
       div.appendChild(label);
       box.appendChild(div);
     });
@@ -201,7 +203,7 @@ function renderFrames(p) {
     table.id = "obs-table";
     const head = "<tr><th>env step</th>" + (frames[0] ? frames[0].obs.map((_, i) => `<th>obs[${i}]</th>`).join("") : "") + "</tr>";
     table.innerHTML = head + frames.map((f) =>
-      `<tr><td>${f.env_step}</td>${f.obs.map((v) => `<td>${fmt(v)}</td>`).join("")}</tr>`).join("");
+      `<tr${f.fell ? ' class="fell" title="fell: the episode ended here"' : ""}><td>${f.env_step}${f.fell ? " (fell)" : ""}</td>${f.obs.map((v) => `<td>${fmt(v)}</td>`).join("")}</tr>`).join("");
     $("obs-view").appendChild(table);
   }
 }
@@ -221,7 +223,20 @@ function renderHeader(s) {
   $("progress-info").textContent = `env step ${step} / ${r.total_env_steps}, ${s.recorded} recorded`;
   $("pause").textContent = s.paused ? "Resume" : "Pause";
   $("last-submitted").textContent = s.last_submitted ? fmtVec(s.last_submitted) : "-";
+  renderFalls(s);
   document.body.dataset.status = s.status;
+}
+
+// A fall ends the episode (the task's health rule): the env restarts from a fresh state and a
+// demonstration in progress there ends with it.
+function renderFalls(s) {
+  if (!s.falls) { $("fall-info").textContent = ""; return; }
+  const last = s.last_fall;
+  $("fall-info").textContent = `falls ${s.falls}, the last at env step ${last.env_step} (env ${last.env})`;
+  if (s.falls > fallsSeen) {
+    fallsSeen = s.falls;
+    message(`env ${last.env} fell at env step ${last.env_step}: its episode ended and a new one began`, "err");
+  }
 }
 
 function renderPending(p) {
