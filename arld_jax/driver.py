@@ -517,6 +517,7 @@ def evaluate_expert(
     mean, ci = mean_ci95(returns)
     return {
         "path": str(path),
+        "env_name": cfg.env_name,
         "backend": cfg.backend,
         "episodes": episodes,
         "seed": seed,

@@ -35,6 +35,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import dataclasses
+import io
 import os
 import queue
 import sys
@@ -346,15 +347,20 @@ _THIRD_PARTY_NOISE = (
 @contextlib.contextmanager
 def without_third_party_noise() -> Iterator[None]:
     """Run the block with stdout/stderr captured at the file-descriptor level (MuJoCo's C code
-    writes there directly), then re-print every captured line except `_THIRD_PARTY_NOISE`; an
-    exception in the block re-prints everything, so nothing that explains an error is lost."""
+    writes there directly) and at Python's level (`sys.stdout` need not be file descriptor 1, e.g.
+    under pytest), then re-print every captured line except `_THIRD_PARTY_NOISE`; an exception in
+    the block re-prints everything, so nothing that explains an error is lost."""
     sys.stdout.flush()
     sys.stderr.flush()
     saved = {fd: os.dup(fd) for fd in (1, 2)}
+    python_level = io.StringIO()
     with tempfile.TemporaryFile(mode="w+b") as capture, warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*not actively being maintained.*")
         failed = False
+        redirect = contextlib.ExitStack()
         try:
+            redirect.enter_context(contextlib.redirect_stdout(python_level))
+            redirect.enter_context(contextlib.redirect_stderr(python_level))
             for fd in (1, 2):
                 os.dup2(capture.fileno(), fd)
             yield
@@ -364,10 +370,12 @@ def without_third_party_noise() -> Iterator[None]:
         finally:
             sys.stdout.flush()
             sys.stderr.flush()
+            redirect.close()
             for fd, copy_fd in saved.items():
                 os.dup2(copy_fd, fd)
                 os.close(copy_fd)
             capture.seek(0)
-            for line in capture.read().decode(errors="replace").splitlines():
+            captured = capture.read().decode(errors="replace") + python_level.getvalue()
+            for line in captured.splitlines():
                 if line.strip() and (failed or not any(n in line for n in _THIRD_PARTY_NOISE)):
                     print(line, file=sys.stderr)

@@ -38,7 +38,7 @@ from arld_jax.rundir import (
     swept_fields,
 )
 from arld_jax.stats import mean_ci95, mean_ci95_columns
-from arld_jax.summary import cell_name, has_falls
+from arld_jax.summary import cell_name, has_falls, has_gait_rule
 
 DPI = 110
 SMOOTH_WINDOW = 5
@@ -508,10 +508,10 @@ def _cell_bands(run: Run, panels: list[tuple[str, str, str, float]], suptitle: s
 def fig_gait(run: Run) -> Figure | None:
     """The gait: % of visited training states (left) and of evaluation states (right) with the
     torso upside down, per period and cell, mean and 95% CI over seeds. A run that learned the
-    flipped local optimum sits near 100% (`gait.upside_down`). HalfCheetah runs with the metric only."""
+    flipped local optimum sits near 100% (`gait.upside_down`). Runs with the metric, of a task with
+    a gait rule (HalfCheetah), only."""
     metrics = run.metrics
-    env_name = run.cfg.get("env_name")
-    if run.periods == 0 or "upside_down" not in metrics or env_name != "halfcheetah":
+    if run.periods == 0 or "upside_down" not in metrics or not has_gait_rule(run):
         return None
     ylabel = "% of states upside down (|pitch| > 90°)"
     panels = [

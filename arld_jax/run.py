@@ -29,6 +29,7 @@ from arld_jax.config import BACKENDS
 from arld_jax.human import cli as human_cli
 from arld_jax.rundir import CONFIG_FILE, GROUP_FILE
 from arld_jax.sweep import REPO_ROOT, SHIPPED_EXPERT, SWEEP_PRESETS, Sweep, SweepGroup
+from arld_jax.tasks import REGISTRY as TASKS
 
 PROG = "python -m arld_jax.run"
 
@@ -245,10 +246,16 @@ def main(argv: list[str] | None = None) -> None:
         except (FileNotFoundError, ValueError) as err:
             raise SystemExit(f"error: {err}") from None
         print(json.dumps(r, indent=1))
+        spec = TASKS[r["env_name"]]
+        health = [f"{100 * r['upside_down']:.1f}% of states upside down"] * spec.has_gait_rule
+        if spec.can_terminate:
+            health.append(
+                f"{100 * r['fell']:.0f}% of episodes fell (mean length {r['episode_length']:.0f})"
+            )
         print(
-            f"expert {r['path']} ({r['backend']}): deterministic return {r['return_mean']:.1f} ± "
-            f"{r['return_ci95']:.1f} (95% CI, {r['episodes']} fresh episodes), "
-            f"{100 * r['upside_down']:.1f}% of states upside down"
+            f"expert {r['path']} ({r['env_name']}, {r['backend']}): deterministic return "
+            f"{r['return_mean']:.1f} ± {r['return_ci95']:.1f} (95% CI, {r['episodes']} fresh "
+            "episodes)" + "".join(", " + h for h in health)
         )
         return
     if args.command == "compare":

@@ -99,6 +99,15 @@ def has_falls(run: RunDir) -> bool:
     )
 
 
+def has_gait_rule(run: RunDir) -> bool:
+    """Whether the run's task has a gait rule (HalfCheetah's flipped torso, `TaskSpec.upside_down`):
+    the runs whose tables show the upside-down share."""
+    from arld_jax.tasks import REGISTRY
+
+    spec = REGISTRY.get(run.cfg.get("env_name", "halfcheetah"))
+    return spec is not None and spec.has_gait_rule
+
+
 def upside_down_late(run: RunDir) -> tuple[np.ndarray, str]:
     """[R] fraction of visited training states upside down in the last 30% of the periods present
     (`gait.LATE_FRACTION`), and where it came from: "periods" (the per-period metric
@@ -108,13 +117,12 @@ def upside_down_late(run: RunDir) -> tuple[np.ndarray, str]:
     metrics = run.metrics
     num_runs, periods = run.metrics["eval_return"].shape[:2]
     nan = np.full(num_runs, np.nan)
-    if periods == 0:
+    if periods == 0 or not has_gait_rule(run):
         return nan, "n/a"
     if "upside_down" in metrics:
         late = max(1, math.ceil(gait.LATE_FRACTION * periods))
         return np.mean(np.asarray(metrics["upside_down"], np.float64)[:, -late:], axis=1), "periods"
-    env_name = run.cfg.get("env_name")
-    if env_name != "halfcheetah" or "visited_obs" not in metrics:
+    if "visited_obs" not in metrics:
         return nan, "n/a"
     last = env_steps_axis(run)[-1]
     late = (metrics["visited_valid"]) & (
@@ -219,7 +227,7 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
     """The Markdown summary: a header stating what the numbers are, then one table row per cell."""
     config = run.config
     cfg = config.get("config", {})
-    falls = has_falls(run)
+    falls, flips = has_falls(run), has_gait_rule(run)
     total = int(cfg.get("total_env_steps") or 0)
     last = rows[0]["env_steps"] if rows else 0
     seeds = config.get("seeds", [])
@@ -255,9 +263,13 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
         "Cells are mean ± half-width of the 95% confidence interval of the mean over seeds "
         "(Student's t, n − 1 dof; n/a with one seed). Final return: evaluation return at the last "
         "evaluation present. AUC: mean evaluation return over all evaluation points present. "
-        "Demos: cumulative demonstrated env steps at the end. Upside down: % of the visited "
-        "training states with the torso upside down (|pitch| > 90°) in the last 30% of the "
-        "periods present (the flipped gait; HalfCheetah only)."
+        "Demos: cumulative demonstrated env steps at the end."
+        + (
+            " Upside down: % of the visited training states with the torso upside down "
+            "(|pitch| > 90°) in the last 30% of the periods present (the flipped gait)."
+            if flips
+            else ""
+        )
         + (
             " Fell: % of the training episodes finished in the last 30% of the periods that "
             "ended by a fall (the task's termination), and their mean length in env steps."
@@ -283,7 +295,7 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
         "final return",
         "AUC (mean return)",
         "demos used",
-        "upside down (last 30%)",
+        *(["upside down (last 30%)"] if flips else []),
         *(["fell (last 30%)", "episode length (last 30%)"] if falls else []),
     ]
     lines.append("| " + " | ".join(columns) + " |")
@@ -297,8 +309,11 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
             format_mean_ci(row["final_return_mean"], row["final_return_ci95"]),
             format_mean_ci(row["auc_mean"], row["auc_ci95"]),
             format_mean_ci(row["demos_used_mean"], row["demos_used_ci95"]),
-            _format_percent(row["upside_down_late_mean"], row["upside_down_late_ci95"]),
         ]
+        if flips:
+            values.append(
+                _format_percent(row["upside_down_late_mean"], row["upside_down_late_ci95"])
+            )
         if falls:
             values += [
                 _format_percent(row["fell_late_mean"], row["fell_late_ci95"]),
@@ -359,18 +374,23 @@ def write_group_summary(group_dir: str | Path) -> tuple[Path, Path]:
     ]
     if command:
         lines += [f"Command: `{command}`", ""]
+    flips = any(row["upside_down_source"] != "n/a" for row in rows)
     lines += [
         "| agent | cell | seeds | final return | AUC (mean return) | demos used |"
-        " upside down (last 30%) |",
-        "|---|---|---:|---:|---:|---:|---:|",
+        + (" upside down (last 30%) |" if flips else ""),
+        "|---|---|---:|---:|---:|---:|" + ("---:|" if flips else ""),
     ]
     for row in rows:
         lines.append(
             f"| {row['agent']} | {row['name']} | {row['n_seeds']} | "
             f"{format_mean_ci(row['final_return_mean'], row['final_return_ci95'])} | "
             f"{format_mean_ci(row['auc_mean'], row['auc_ci95'])} | "
-            f"{format_mean_ci(row['demos_used_mean'], row['demos_used_ci95'])} | "
-            f"{_format_percent(row['upside_down_late_mean'], row['upside_down_late_ci95'])} |"
+            f"{format_mean_ci(row['demos_used_mean'], row['demos_used_ci95'])} |"
+            + (
+                f" {_format_percent(row['upside_down_late_mean'], row['upside_down_late_ci95'])} |"
+                if flips
+                else ""
+            )
         )
     md_path = group_dir / SUMMARY_MD
     md_path.write_text("\n".join(lines) + "\n")

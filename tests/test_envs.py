@@ -223,6 +223,18 @@ def test_third_party_noise_is_dropped_and_everything_else_kept(capfd):
     assert "it matters now" in out + err
 
 
+def test_third_party_noise_is_dropped_at_python_level(capsys):
+    """Also when `sys.stdout` is not file descriptor 1 (pytest's capsys, a notebook): MJX's Warp
+    message is a Python `print`."""
+    from arld_jax.envs import without_third_party_noise
+
+    with without_third_party_noise():
+        print("Failed to import mujoco_warp: No module named 'warp'")
+        print("a message of our own")
+    out, err = capsys.readouterr()
+    assert "warp" not in out + err and "a message of our own" in out + err
+
+
 def test_building_halfcheetah_prints_no_third_party_noise(capfd):
     """Building Brax's halfcheetah printed MuJoCo's 'settotalmass' deprecation and Brax's
     maintenance notice at every run; now neither (the MJX import's Warp message is covered by the

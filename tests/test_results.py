@@ -323,15 +323,19 @@ def test_upside_down_late_from_period_metric(tmp_path: Path) -> None:
     n = m["eval_return"].shape[0]
     m["upside_down"] = np.arange(10)[None, :] / 10 + np.arange(n)[:, None] / 100
     np.savez(path / "metrics.npz", **m)
+    # The toy task has no gait rule: no upside-down share, column or figure.
+    late, source = summary.upside_down_late(rundir.load_run(path))
+    assert source == "n/a" and np.all(np.isnan(late))
+    assert plots.fig_gait(rundir.load_run(path)) is None
+    assert "upside down" not in summary.write_summary(path)[1].read_text().lower()
+    cfg = json.loads((path / "config.json").read_text())
+    cfg["config"]["env_name"] = "halfcheetah"
+    (path / "config.json").write_text(json.dumps(cfg))
     late, source = summary.upside_down_late(rundir.load_run(path))
     assert source == "periods"
     np.testing.assert_allclose(late, 0.8 + np.arange(n) / 100)
     rows = summary.summarize(path)
     np.testing.assert_allclose(rows[1]["upside_down_late_mean"], 0.8 + 0.04)  # runs 3, 4, 5
-    assert plots.fig_gait(rundir.load_run(path)) is None  # toy env: no gait figure
-    cfg = json.loads((path / "config.json").read_text())
-    cfg["config"]["env_name"] = "halfcheetah"
-    (path / "config.json").write_text(json.dumps(cfg))
     assert (path / "figures" / "gait.png") in plots.plot_all(path)
     assert "upside down (last 30%)" in (summary.write_summary(path)[1]).read_text()
 

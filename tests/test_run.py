@@ -460,9 +460,10 @@ def test_sharded_over_two_devices_equals_one_device(uninterrupted, tmp_path):
     np.testing.assert_array_equal(a["demos_used"][not_active], b["demos_used"][not_active])
 
 
-def test_evaluate_expert_rolls_out_fresh_episodes(uninterrupted, tmp_path):
+def test_evaluate_expert_rolls_out_fresh_episodes(uninterrupted, tmp_path, capsys):
     """`evaluate_expert` reports the exported actor's deterministic return on fresh episodes (a
-    trained toy policy earns close to 1 per step, an untrained one far less) and no gait."""
+    trained toy policy earns close to 1 per step, an untrained one far less) and no gait; its
+    printed line names neither a gait nor falls, which the toy task has not."""
     _, full = uninterrupted
     driver.export_expert(full, tmp_path / "expert")
     report = driver.evaluate_expert(tmp_path / "expert", episodes=4, seed=3)
@@ -470,6 +471,9 @@ def test_evaluate_expert_rolls_out_fresh_episodes(uninterrupted, tmp_path):
     assert report["return_mean"] == pytest.approx(np.mean(report["returns"]), abs=0.1)
     assert report["return_mean"] > 0.85 * 1000  # Config's default 1,000-step episodes
     assert report["upside_down"] == 0.0  # the toy env has no body
+    run.main(["evaluate_expert", str(tmp_path / "expert"), "--episodes", "2"])
+    line = capsys.readouterr().out.strip().splitlines()[-1]
+    assert "(toy, " in line and "upside down" not in line and "fell" not in line
     with pytest.raises(SystemExit, match="at least 2"):
         run.main(["evaluate_expert", str(tmp_path / "expert"), "--episodes", "1"])
 
@@ -483,7 +487,7 @@ def test_shipped_expert_runs_as_well_in_mujoco_c_physics(capsys):
     report = json.loads(out[: out.rindex("}") + 1])
     assert report["backend"] == "mujoco" and len(report["returns"]) == 2
     assert min(report["returns"]) > 5_000 and report["upside_down"] == 0.0
-    assert "(mujoco): deterministic return" in out
+    assert "(halfcheetah, mujoco): deterministic return" in out and "upside down" in out
 
 
 def test_export_expert_from_a_run_acts_like_its_best_actor(uninterrupted, tmp_path):

@@ -17,10 +17,11 @@ import pytest
 from scipy import stats
 
 from arld_jax import agents, config, losses, networks
-from arld_jax.agents import REGISTRY, boot_td3, td3
+from arld_jax.agents import REGISTRY, AgentSpec, boot_td3, td3
 from arld_jax.envs import make_env
 from arld_jax.evaluate import evaluate_policy
 from arld_jax.expert import toy_expert
+from arld_jax.registry import discover
 from arld_jax.train import make_train
 from arld_jax.types import Transition
 
@@ -92,11 +93,13 @@ def test_an_agent_module_is_registered_by_being_there(tmp_path) -> None:  # noqa
     (package / "helpers.py").write_text("VALUE = 1\n")
     sys.path.insert(0, str(tmp_path))
     try:
-        found = agents.discover("more_agents", [str(package)])
+        found = discover("more_agents", [str(package)], AgentSpec)
         assert list(found) == ["copy_td3"] and found["copy_td3"].display == "CopyTD3"
         (package / "twin.py").write_text("from more_agents.copy_td3 import SPEC\n")
-        with pytest.raises(ValueError, match="two agent modules declare the name 'copy_td3'"):
-            agents.discover("more_agents", [str(package)])
+        with pytest.raises(
+            ValueError, match="two modules of more_agents declare the name 'copy_td3'"
+        ):
+            discover("more_agents", [str(package)], AgentSpec)
     finally:
         sys.path.remove(str(tmp_path))
         for name in [m for m in sys.modules if m.startswith("more_agents")]:

@@ -8,31 +8,16 @@ Config fields and checks, the names in summaries and figures, expert export and 
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
-from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
 from arld_jax.agents.base import Acting, Agent, AgentSpec, AgentState, UpdateMetrics
+from arld_jax.registry import discover
 
 if TYPE_CHECKING:
     from arld_jax.config import Config
 
 
-def discover(package: str = __name__, paths: Iterable[str] = __path__) -> dict[str, AgentSpec]:
-    """name -> spec of every module in `paths` (the package's folders) that has a `SPEC`, in the
-    order of the modules' names."""
-    specs: dict[str, AgentSpec] = {}
-    for info in sorted(pkgutil.iter_modules(list(paths)), key=lambda m: m.name):
-        spec = getattr(importlib.import_module(f"{package}.{info.name}"), "SPEC", None)
-        if isinstance(spec, AgentSpec):
-            if spec.name in specs:
-                raise ValueError(f"two agent modules declare the name {spec.name!r}")
-            specs[spec.name] = spec
-    return specs
-
-
-REGISTRY: dict[str, AgentSpec] = discover()
+REGISTRY: dict[str, AgentSpec] = discover(__name__, __path__, AgentSpec)
 """Agent family -> its spec. `Config.agent` names one; `hp.noisy` picks the noisy variant."""
 
 

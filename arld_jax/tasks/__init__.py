@@ -8,27 +8,10 @@ Brax task is built).
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
-from collections.abc import Iterable
-
+from arld_jax.registry import discover
 from arld_jax.tasks.base import Env, EnvState, TaskSpec, never_upside_down
 
-
-def discover(package: str = __name__, paths: Iterable[str] = __path__) -> dict[str, TaskSpec]:
-    """name -> spec of every module in `paths` that has a `SPEC`, in the order of the modules'
-    names."""
-    specs: dict[str, TaskSpec] = {}
-    for info in sorted(pkgutil.iter_modules(list(paths)), key=lambda m: m.name):
-        spec = getattr(importlib.import_module(f"{package}.{info.name}"), "SPEC", None)
-        if isinstance(spec, TaskSpec):
-            if spec.name in specs:
-                raise ValueError(f"two task modules declare the name {spec.name!r}")
-            specs[spec.name] = spec
-    return specs
-
-
-REGISTRY: dict[str, TaskSpec] = discover()
+REGISTRY: dict[str, TaskSpec] = discover(__name__, __path__, TaskSpec)
 """Task name (`Config.env_name`) -> its spec."""
 
 BRAX_TASKS: tuple[str, ...] = tuple(n for n, s in REGISTRY.items() if s.brax_name is not None)

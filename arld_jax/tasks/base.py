@@ -117,6 +117,12 @@ class TaskSpec:
     target_action: Callable[[jax.Array], jax.Array] | None = None
     """A pure-JAX task's best action, known in closed form: its expert."""
 
+    @property
+    def has_gait_rule(self) -> bool:
+        """Whether the task has a gait rule (`upside_down`): the upside-down share is reported
+        for these tasks only."""
+        return self.upside_down is not never_upside_down
+
     def make(self, backend: str) -> Env:
         """The batched env on `backend` ('mjx', 'mujoco', or one of Brax's own pipelines)."""
         if self.make_pure is not None:
