@@ -95,6 +95,12 @@ def save_expert(path: str | Path, actor_params: Params, meta: dict[str, Any]) ->
     return path
 
 
+def train_expert_command(env_name: str) -> str:
+    """The command that trains task `env_name`'s expert (plain SAC, 5 seeds of 300k env steps, the
+    `sac_300k` preset) and saves the best seed's actor where the task's runs find it."""
+    return f"python -m arld_jax.run train_expert --preset sac_300k --env_name {env_name}"
+
+
 def read_expert_meta(path: str | Path) -> dict[str, Any]:
     """The expert's metadata; FileNotFoundError (saying how to get one) if no expert is there."""
     path = Path(path).absolute()
@@ -102,7 +108,7 @@ def read_expert_meta(path: str | Path) -> dict[str, Any]:
     if not meta_file.is_file() or not (path / PARAMS_DIR).is_dir():
         raise FileNotFoundError(
             f"No expert at {path}: expected {META_FILE} and {PARAMS_DIR}/ there. Train one with "
-            "`python -m arld_jax.run train_expert --env_name TASK`, or leave --expert_path unset "
+            f"`{train_expert_command('TASK')}`, or leave --expert_path unset "
             "for the task's shipped expert (HalfCheetah's: experiments/expert)."
         )
     return json.loads(meta_file.read_text())
@@ -132,8 +138,8 @@ def check_expert_task(meta: dict[str, Any], path: str | Path, env_name: str) -> 
         raise ValueError(
             f"Expert at {Path(path).absolute()} acts in task {task!r}, but this run's task is "
             f"{env_name!r}: leave --expert_path unset for {env_name!r}'s shipped expert, pass the "
-            f"directory of an expert of {env_name!r}, or train one with `python -m arld_jax.run "
-            f"train_expert --env_name {env_name}`."
+            f"directory of an expert of {env_name!r}, or train one with "
+            f"`{train_expert_command(env_name)}`."
         )
 
 

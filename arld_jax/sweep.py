@@ -79,7 +79,7 @@ def expert_path_for(cfg: Config) -> Path | None:
     (`resolve_expert_path`), else the expert shipped for the task (`task_expert_dir`); None for a
     task whose expert is known in closed form (the toy tasks). ValueError, saying how to train one,
     when the task has no shipped expert."""
-    from arld_jax.expert import META_FILE
+    from arld_jax.expert import META_FILE, train_expert_command
 
     if cfg.expert_path is not None:
         return resolve_expert_path(cfg.expert_path)
@@ -89,10 +89,9 @@ def expert_path_for(cfg: Config) -> Path | None:
     if not (path / META_FILE).is_file():
         raise ValueError(
             f"no expert is shipped for task {cfg.env_name!r} (none at {path}), and a query "
-            "strategy other than 'none' needs one. Train one with plain SAC: `python -m "
-            f"arld_jax.run train_expert --env_name {cfg.env_name} --seeds 0,1,2,3,4 "
-            "--total_env_steps 300000 --replay_capacity 300000` (it saves the best seed's actor "
-            "there, where it becomes the task's default), or pass --expert_path DIR"
+            "strategy other than 'none' needs one. Train one with plain SAC: "
+            f"`{train_expert_command(cfg.env_name)}` (it saves the best seed's actor there, "
+            "where it becomes the task's default), or pass --expert_path DIR"
         )
     return path
 
@@ -389,6 +388,40 @@ def preset_arld_400k() -> Sweep:
     )
 
 
+def _tasks_sac_config() -> Config:
+    """Plain SAC's protocol on any locomotion task (`--env_name`), for parity with other trainers
+    and for the task's expert: 300k env steps, 1 env, one update per env step, SAC's defaults
+    (2x256 networks, batch 256, alpha 0.2, reward scale 5 as SAC's authors used for Hopper,
+    Walker2d, HalfCheetah and Ant), 10 deterministic evaluation episodes every 10k steps (episodes
+    of Hopper and Walker2d vary with their initial state more than HalfCheetah's), physics 'auto'
+    (MuJoCo's C engine on a CPU)."""
+    return Config(
+        total_env_steps=300_000,
+        replay_capacity=300_000,
+        eval_every=10_000,
+        num_eval_episodes=10,
+    )
+
+
+def preset_sac_300k() -> Sweep:
+    """Plain SAC on a task at 300k env steps, 5 seeds (`--env_name hopper`, `walker2d`, `ant`):
+    the parity run against published SAC and sbx. `train_expert --preset sac_300k --env_name T`
+    trains the same runs and ships the best seed's actor as T's expert."""
+    return Sweep(cfg=_tasks_sac_config(), seeds=tuple(range(5)))
+
+
+def preset_arld_task() -> Sweep:
+    """The paper's comparison with sigma_theta (SAC, GQSAC, BQSAC b = 0.1, AQSAC t_query = 0.1) on
+    any task (`--env_name hopper`), at the `arld` protocol: 100k env steps at 1 env, budget 2,500
+    (the paper's 10,000 scaled to the length), C = 1, N_r 5,000, 5 seeds; physics 'auto'. Asks the
+    task's shipped expert (`train_expert --preset sac_300k --env_name T` makes it)."""
+    return Sweep(
+        cfg=_arld_100k_config().replace(backend="auto"),
+        sweep={"strategy": STRATEGIES},
+        seeds=tuple(range(5)),
+    )
+
+
 def preset_fig1() -> SweepGroup:
     """The paper's Fig. 1 on this CPU: the TD3 family under ARLD on the `arld` protocol. TD3 and
     Noisy TD3 (uncertainty 'extrinsic') share one program; Bootstrapped TD3 (its uncertainty is the
@@ -415,6 +448,8 @@ SWEEP_PRESETS: dict[str, Callable[[], Sweep | SweepGroup]] = {
     "fig1": preset_fig1,
     "experiment": preset_experiment,
     "sac": preset_sac,
+    "sac_300k": preset_sac_300k,
+    "arld_task": preset_arld_task,
     "paper": preset_paper,
     "tiny": preset_tiny,
 }

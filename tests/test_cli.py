@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from arld_jax import cli, config, run
+from arld_jax.config import STRATEGIES
 from arld_jax.human import cli as human_cli
 from arld_jax.human.cli import human_config
 from arld_jax.sweep import SWEEP_PRESETS
@@ -229,3 +230,20 @@ def test_train_expert_defaults_to_the_sac_preset():
     args, sweep = run.parse_args(["train_expert"])
     assert args.preset == "expert"
     assert sweep.to_json() == SWEEP_PRESETS["sac"]().to_json()
+
+
+def test_task_presets_run_on_any_task():
+    """`sac_300k` and `arld_task` take the task from --env_name: plain SAC at 300k over 5 seeds,
+    and the four strategies with sigma_theta at the `arld` protocol, on the C engine on a CPU."""
+    _, sac = run.parse_args(["seed_sweep", "--preset", "sac_300k", "--env_name", "walker2d"])
+    assert (sac.cfg.env_name, sac.cfg.total_env_steps, sac.cfg.strategy) == (
+        "walker2d",
+        300_000,
+        "none",
+    )
+    assert sac.seeds == (0, 1, 2, 3, 4) and sac.sweep == {}
+    _, arld = run.parse_args(["seed_sweep", "--preset", "arld_task", "--env_name", "hopper"])
+    assert arld.cfg.env_name == "hopper" and arld.sweep == {"strategy": STRATEGIES}
+    assert (arld.cfg.total_env_steps, arld.cfg.budget, arld.cfg.demo_steps) == (100_000, 2_500, 1)
+    assert arld.cfg.uncertainty == "intrinsic"
+    assert arld.cfg.backend == config.auto_backend(config.jax_platform())

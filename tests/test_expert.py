@@ -72,7 +72,7 @@ def test_expert_of_another_task_is_refused_even_with_the_same_sizes(tmp_path):
     with pytest.raises(ValueError, match="acts in task 'walker2d', but this run's task is 'halfc"):
         load_expert(tmp_path / "e", obs_dim=17, action_dim=6, env_name="halfcheetah")
     assert load_expert(tmp_path / "e", 17, 6, env_name="walker2d").meta["env_name"] == "walker2d"
-    with pytest.raises(ValueError, match="train_expert --env_name hopper"):
+    with pytest.raises(ValueError, match="train_expert --preset sac_300k --env_name hopper"):
         check_expert_task({"env_name": "walker2d"}, tmp_path / "e", "hopper")
 
 
@@ -102,7 +102,18 @@ def test_the_default_expert_is_the_tasks_shipped_one(tmp_path, monkeypatch):
     monkeypatch.setattr(sweep, "REPO_ROOT", tmp_path)  # a checkout with no hopper expert
     with pytest.raises(ValueError, match="no expert is shipped for task 'hopper'") as info:
         sweep.expert_path_for(Config(env_name="hopper"))
-    assert "train_expert --env_name hopper" in str(info.value)
+    # The command it names trains Hopper's expert: plain SAC, 5 seeds of 300k env steps.
+    from arld_jax import run
+
+    command = str(info.value).split("`")[1].split()
+    assert command[:3] == ["python", "-m", "arld_jax.run"]
+    args, how = run.parse_args(command[3:])
+    assert args.command == "train_expert" and how.seeds == (0, 1, 2, 3, 4)
+    assert (how.cfg.env_name, how.cfg.total_env_steps, how.cfg.strategy) == (
+        "hopper",
+        300_000,
+        "none",
+    )
     _, params, meta = _actor_and_params(obs_dim=11, action_dim=3)
     save_expert(tmp_path / "experiments" / "expert_hopper", params, meta | {"env_name": "hopper"})
     assert sweep.expert_path_for(Config(env_name="hopper")) == (
