@@ -1,3 +1,4 @@
-"""Other projects' trainers run beside arld_jax's: each in its own virtual environment, as a child
-process (`brax_sac.py`, which imports nothing from arld_jax), timed at the same configs
-(`section.py`, the benchmark's `peers` section)."""
+"""Other projects' trainers run beside arld_jax's, each in its own virtual environment, as a child
+process that imports nothing from arld_jax: Brax's SAC (`brax_sac.py`), timed at the same configs
+(`section.py`, the benchmark's `peers` section), and sbx's SAC on Gymnasium's v5 tasks
+(`sbx_sac.py`), the learning-curve peer of the `sac_300k` parity runs."""
