@@ -26,6 +26,7 @@ from arld_jax.rundir import (
     expert_return,
     group_cells,
     run_field,
+    swept_fields,
 )
 from arld_jax.stats import (
     BOOTSTRAP_REPS,
@@ -33,43 +34,65 @@ from arld_jax.stats import (
     bootstrap_difference,
     welch_ci95,
 )
-from arld_jax.summary import has_falls, summarize
+from arld_jax.summary import cell_name, has_falls, summarize
 
 
 def comparison_pairs(run: RunDir) -> list[tuple[str, Cell, Cell]]:
     """The comparisons the paper draws, as (name, cell a, cell b) meaning "a minus b": for each
-    uncertainty measure active vs Bernoulli, greedy and none (the passive strategies and no
-    demonstrations that Fig. 1 says ARLD can fall behind), and for each strategy intrinsic vs
-    extrinsic. Only where exactly one cell has each (strategy, uncertainty). Named after the run's
-    agent family (AQSAC - BQSAC for SAC, AQTD3 - BQTD3 for TD3)."""
+    uncertainty measure every active cell against every Bernoulli, greedy and no-query cell (the
+    passive strategies and no demonstrations that Fig. 1 says ARLD can fall behind), and for each
+    strategy intrinsic against extrinsic (the cells alike in every other swept field). Named
+    after the run's agent family (AQSAC - BQSAC for SAC, AQTD3 - BQTD3 for TD3); where a strategy
+    has several cells (BQSAC with b 0.1 and 0.2), each side by its cell's name (BQSAC b=0.2)."""
     agent = run.agent
     by_key: dict[tuple[str, str], list[Cell]] = {}
     for cell in group_cells(run):
         strategy = run_field(run, cell.runs[0], "strategy", "none")
         uncertainty = run_field(run, cell.runs[0], "uncertainty", "intrinsic")
         by_key.setdefault((strategy, uncertainty), []).append(cell)
-    one = {k: v[0] for k, v in by_key.items() if len(v) == 1}
+
+    def name(cell: Cell, strategy: str, uncertainty: str) -> str:
+        if len(by_key[(strategy, uncertainty)]) == 1:
+            return paper_name(strategy, agent, uncertainty)
+        return cell_name(run, cell)
+
     pairs = []
     for u in UNCERTAINTIES:
-        for other in ("bernoulli", "greedy", "none"):
-            if ("active", u) in one and (other, u) in one:
-                name = f"{paper_name('active', agent, u)} - {paper_name(other, agent, u)}"
-                pairs.append((name, one[("active", u)], one[(other, u)]))
+        for a in by_key.get(("active", u), []):
+            for other in ("bernoulli", "greedy", "none"):
+                for b in by_key.get((other, u), []):
+                    pairs.append((f"{name(a, 'active', u)} - {name(b, other, u)}", a, b))
+    others = [f for f in swept_fields(run) if f not in ("strategy", "uncertainty")]
     for s in STRATEGIES[::-1]:
-        if (s, "intrinsic") in one and (s, "extrinsic") in one:
-            name = f"{paper_name(s, agent)} - {paper_name(s, agent, 'extrinsic')}"
-            pairs.append((name, one[(s, "intrinsic")], one[(s, "extrinsic")]))
+        for a in by_key.get((s, "intrinsic"), []):
+            for b in by_key.get((s, "extrinsic"), []):
+                alike = all(
+                    run_field(run, a.runs[0], f) == run_field(run, b.runs[0], f) for f in others
+                )
+                if alike or len(by_key[(s, "intrinsic")]) == len(by_key[(s, "extrinsic")]) == 1:
+                    pairs.append((f"{name(a, s, 'intrinsic')} - {name(b, s, 'extrinsic')}", a, b))
     return pairs
+
+
+def reading_steps(run: RunDir) -> list[int]:
+    """The env steps at which `compare` also reads every pair, besides the last evaluation: a
+    quarter and half of the run's length (100k and 200k of a 400k run), where evaluated and
+    present, so that a reader sees whether the ranking changes with the length of the run."""
+    total = int(run.cfg.get("total_env_steps") or 0)
+    steps = [int(s) for s in env_steps_axis(run)]
+    return [at for at in (total // 4, total // 2) if at in steps[:-1]]
 
 
 def compare(run_dir: str | Path | RunDir, reps: int = BOOTSTRAP_REPS, seed: int = 0) -> list[dict]:
     """Pairwise differences of `comparison_pairs` with stratified-bootstrap 95% CIs (rliable,
-    Agarwal et al. 2021): for the final and the area-under-curve return, the difference of the
-    cells' means over seeds and the probability that a run of a beats a run of b. Rows: pair,
-    metric and the keys of `bootstrap_difference`."""
+    Agarwal et al. 2021): for the final and the area-under-curve return, and the return at each of
+    `reading_steps`, the difference of the cells' means over seeds and the probability that a run
+    of a beats a run of b. Rows: pair, metric and the keys of `bootstrap_difference`."""
     run = as_run(run_dir)
     eval_return = np.asarray(run.metrics["eval_return"], dtype=np.float64)
-    values = {
+    steps = [int(s) for s in env_steps_axis(run)]
+    values = {f"return at {at:,}": eval_return[:, steps.index(at)] for at in reading_steps(run)}
+    values |= {
         "final return": eval_return[:, -1],
         "AUC": area_under_curve(eval_return, env_steps_axis(run)),
     }
@@ -192,7 +215,10 @@ def write_comparison(run_dir: str | Path | RunDir) -> Path | None:
         f"run of a scores higher than a run of b (Agarwal et al. 2021), {INTERVALS} "
         "At the last evaluation present: "
         f"{int(env_steps_axis(run)[-1]):,} "
-        "env steps." + (" **Partial run directory.**" if run.partial else ""),
+        "env steps"
+        + "".join(f"; also at {at:,}" for at in reading_steps(run))
+        + "."
+        + (" **Partial run directory.**" if run.partial else ""),
         "",
         format_comparison(rows),
     ]

@@ -31,12 +31,15 @@ from arld_jax.rundir import (
     run_field,
     swept_fields,
 )
-from arld_jax.stats import area_under_curve, mean_ci95
+from arld_jax.stats import area_under_curve, iqm_ci95, mean_ci95
 
 STAT_COLUMNS: tuple[str, ...] = (
     "n_seeds",
     "final_return_mean",
     "final_return_ci95",
+    "final_return_iqm",
+    "final_return_iqm_lo",
+    "final_return_iqm_hi",
     "auc_mean",
     "auc_ci95",
     "demos_used_mean",
@@ -138,7 +141,8 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
     """One row per cell, in cell order, over the evaluation periods present.
 
     Row keys: ``cell``, ``cell_label``, ``name`` (`cell_name`: the paper's names), the swept fields' values, then `STAT_COLUMNS`:
-    n_seeds; final_return_mean/ci95 (eval return at the last evaluation present); auc_mean/ci95
+    n_seeds; final_return_mean/ci95 (eval return at the last evaluation present);
+    final_return_iqm/_lo/_hi (its interquartile mean and 95% bootstrap interval, `iqm_ci95`); auc_mean/ci95
     (`area_under_curve`); demos_used_mean/ci95 (final cumulative demonstrations); expert_return
     (config.json, or nan); env_steps_per_second (timing.json, all runs together, or nan); periods
     (evaluation periods present) and env_steps (env steps at the last evaluation present).
@@ -175,6 +179,10 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
             row[name] = run_field(run, cell.runs[0], name)
         row["n_seeds"] = int(idx.size)
         row["final_return_mean"], row["final_return_ci95"] = mean_ci95(final)
+        iqm_interval = iqm_ci95(final)
+        row["final_return_iqm"], row["final_return_iqm_lo"], row["final_return_iqm_hi"] = (
+            iqm_interval
+        )
         row["auc_mean"], row["auc_ci95"] = mean_ci95(auc[idx])
         row["demos_used_mean"], row["demos_used_ci95"] = mean_ci95(final_demos)
         row["upside_down_late_mean"], row["upside_down_late_ci95"] = mean_ci95(flipped[idx])
@@ -207,6 +215,14 @@ def format_mean_ci(mean: float, ci: float) -> str:
             decimals = min(4, max(0, 2 - math.floor(math.log10(magnitude))))
     ci_text = f"{ci:.{decimals}f}" if math.isfinite(ci) else "n/a"
     return f"{mean:.{decimals}f} ± {ci_text}"
+
+
+def format_iqm(row: dict[str, Any]) -> str:
+    """A row's final-return IQM as "iqm [lo, hi]" (whole numbers), "iqm" alone with one seed."""
+    point, lo, hi = row["final_return_iqm"], row["final_return_iqm_lo"], row["final_return_iqm_hi"]
+    if not math.isfinite(point):
+        return "nan"
+    return f"{point:,.0f}" + (f" [{lo:,.0f}, {hi:,.0f}]" if math.isfinite(lo) else "")
 
 
 def _format_percent(mean: float, ci: float) -> str:
@@ -262,7 +278,8 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
     lines += [
         "Cells are mean ± half-width of the 95% confidence interval of the mean over seeds "
         "(Student's t, n − 1 dof; n/a with one seed). Final return: evaluation return at the last "
-        "evaluation present. AUC: mean evaluation return over all evaluation points present. "
+        "evaluation present; its IQM: the interquartile mean over seeds (rliable's; 5 seeds: the "
+        "middle 3) [95% percentile-bootstrap interval]. AUC: mean evaluation return over all evaluation points present. "
         "Demos: cumulative demonstrated env steps at the end."
         + (
             " Upside down: % of the visited training states with the torso upside down "
@@ -293,6 +310,7 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
         *(fields or ["label"]),
         "seeds",
         "final return",
+        "final IQM",
         "AUC (mean return)",
         "demos used",
         *(["upside down (last 30%)"] if flips else []),
@@ -307,6 +325,7 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
         values += [
             str(row["n_seeds"]),
             format_mean_ci(row["final_return_mean"], row["final_return_ci95"]),
+            format_iqm(row),
             format_mean_ci(row["auc_mean"], row["auc_ci95"]),
             format_mean_ci(row["demos_used_mean"], row["demos_used_ci95"]),
         ]

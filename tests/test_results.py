@@ -205,6 +205,11 @@ def test_summarize_hand_computed(run_dir: Path) -> None:
     assert sac["final_return_mean"] == pytest.approx(410.0)
     assert bq["final_return_mean"] == pytest.approx(810.0)
     assert sac["final_return_ci95"] == pytest.approx(HALF_SD10_N3, abs=1e-3)
+    # IQM of 3 runs cuts none (int(0.25 * 3) = 0): the mean, its bootstrap interval within the
+    # runs' range and about the mean (the seeds' offsets are symmetric).
+    assert sac["final_return_iqm"] == pytest.approx(410.0)
+    assert 400.0 <= sac["final_return_iqm_lo"] < 410.0 < sac["final_return_iqm_hi"] <= 420.0
+    assert sac["final_return_iqm_lo"] + sac["final_return_iqm_hi"] == pytest.approx(820.0, abs=1.0)
     # AUC: mean over p of 100 * (c + 1) * (p + 1) + 10 s = 250 (c + 1) + 10 s -> 260 and 510
     assert sac["auc_mean"] == pytest.approx(260.0)
     assert bq["auc_mean"] == pytest.approx(510.0)
@@ -233,6 +238,9 @@ def test_write_summary_csv_schema_and_markdown(run_dir: Path) -> None:
         "n_seeds",
         "final_return_mean",
         "final_return_ci95",
+        "final_return_iqm",
+        "final_return_iqm_lo",
+        "final_return_iqm_hi",
         "auc_mean",
         "auc_ci95",
         "demos_used_mean",
@@ -254,7 +262,7 @@ def test_write_summary_csv_schema_and_markdown(run_dir: Path) -> None:
     assert float(table[0]["auc_mean"]) == pytest.approx(260.0)
     md = md_path.read_text()
     # two significant digits of the CI: 410 ± 24.84 -> "410 ± 25"; 93.33 ± 28.68 -> "93 ± 29"
-    assert "| 410 ± 25 |" in md
+    assert "| 410 ± 25 | 410 [" in md
     assert "| 810 ± 25 |" in md
     assert "| 93 ± 29 |" in md
     assert "| 0 ± 0 |" in md
@@ -415,6 +423,40 @@ def test_probability_of_improvement_equals_rliables(xs: list[int], ys: list[int]
     assert stats.probability_of_improvement(x, y) == pytest.approx(float(want))
 
 
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.integers(-50, 50), min_size=1, max_size=12))
+def test_iqm_equals_rliables(xs: list[int]) -> None:
+    """The interquartile mean of one task's runs is rliable's `aggregate_iqm`."""
+    from rliable import metrics as rly_metrics
+
+    x = np.asarray(xs, float)
+    assert stats.iqm(x) == pytest.approx(float(rly_metrics.aggregate_iqm(x[:, None])))
+
+
+def test_iqm_interval_agrees_with_rliables_bootstrap() -> None:
+    """The vectorised percentile bootstrap of the IQM gives rliable's interval (its
+    `get_interval_estimates`, stratified over one task) to within the resampling noise, for 5
+    and 10 runs; one run has no interval; a seed reproduces it."""
+    from rliable import library as rly
+    from rliable import metrics as rly_metrics
+
+    rng = np.random.default_rng(0)
+    for n in (5, 10):
+        x = rng.normal(1_000.0, 400.0, n)
+        np.random.seed(1)  # rliable 1.2 draws from numpy's global RNG
+        _, want = rly.get_interval_estimates(
+            {"x": x[:, None]}, lambda s: np.array([rly_metrics.aggregate_iqm(s)]), reps=20_000
+        )
+        point, lo, hi = stats.iqm_ci95(x)
+        assert point == pytest.approx(stats.iqm(x))
+        spread = np.ptp(x)
+        assert lo == pytest.approx(float(want["x"][0, 0]), abs=0.02 * spread)
+        assert hi == pytest.approx(float(want["x"][1, 0]), abs=0.02 * spread)
+        assert lo < point < hi
+    assert stats.iqm_ci95(np.array([3.0]))[1:] == (pytest.approx(math.nan, nan_ok=True),) * 2
+    assert stats.iqm_ci95(x, seed=4) == stats.iqm_ci95(x, seed=4)
+
+
 def test_pairwise_comparison_with_bootstrap_cis(tmp_path: Path) -> None:
     """SAC, BQSAC and AQSAC cells (intrinsic) with eval_return = 100 (cell + 1)(p + 1) + 10 seed:
     final returns are 400/800/1200 + {0, 10, 20}. AQSAC - BQSAC = 400 exactly in every resample's
@@ -557,6 +599,43 @@ def test_comparison_pairs_include_active_against_greedy(tmp_path: Path) -> None:
     a, b = pairs["AQSAC - GQSAC"]
     field = lambda cell: rundir.run_field(run, cell.runs[0], "strategy", None)  # noqa: E731
     assert (field(a), field(b)) == ("active", "greedy")
+
+
+def test_every_bernoulli_cell_is_paired_and_pairs_are_read_at_a_quarter_and_half(
+    tmp_path: Path,
+) -> None:
+    """arld_400k's shape: BQSAC with b = 0.1 and b = 0.2 beside one AQSAC and one SAC. Active is
+    compared with each Bernoulli cell, named by its b; the unique cells keep their plain names.
+    8 periods of 1,000 steps: every pair is also read at 2,000 and 4,000 env steps (a quarter and
+    half of the run), where eval_return = 100 (cell + 1)(p + 1) + 10 seed gives AQSAC (cell 3) -
+    BQSAC b=0.1 (cell 1) = 200 (p + 1): 400 at 2,000 (p = 1), 800 at 4,000 (p = 3), 1,600 at the
+    end."""
+    cells = [
+        {"strategy": "none"},
+        {"strategy": "bernoulli", "query_prob": 0.1},
+        {"strategy": "bernoulli", "query_prob": 0.2},
+        {"strategy": "active"},
+    ]
+    sweep = {"strategy": ["none", "bernoulli", "active"], "query_prob": [0.1, 0.2]}
+    path = write_run_dir(tmp_path / "b", cells, sweep, periods=8, total_periods=8)
+    run = rundir.load_run(path)
+    pairs = {name: (a, b) for name, a, b in compare.comparison_pairs(run)}
+    assert list(pairs) == ["AQSAC - BQSAC b=0.1", "AQSAC - BQSAC b=0.2", "AQSAC - SAC"]
+    assert [c.cell for c in pairs["AQSAC - BQSAC b=0.2"]] == [3, 2]
+    assert compare.reading_steps(run) == [2_000, 4_000]
+    rows = {(r["pair"], r["metric"]): r for r in compare.compare(run, reps=500)}
+    for metric, want in (
+        ("return at 2,000", 400),
+        ("return at 4,000", 800),
+        ("final return", 1600),
+    ):
+        assert rows[("AQSAC - BQSAC b=0.1", metric)]["diff"] == pytest.approx(want)
+    md = compare.write_comparison(path).read_text()
+    assert "also at 2,000; also at 4,000." in md
+    assert "| AQSAC - BQSAC b=0.2 | return at 4,000 | 3 / 3 | 400 [" in md
+    # A partial run reads only the steps it has reached, and not its last one.
+    partial = write_run_dir(tmp_path / "p", cells, sweep, periods=3, total_periods=8)
+    assert compare.reading_steps(rundir.load_run(partial)) == [2_000]
 
 
 def test_comparison_pairs_are_named_after_the_agent_family(tmp_path: Path) -> None:
