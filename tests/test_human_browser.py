@@ -121,23 +121,33 @@ def demo_items(state) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001
     return data.obs[mask], data.action[mask]
 
 
-@pytest.mark.slow
-def test_halfcheetah_page_end_to_end(browser, tmp_path: Path) -> None:  # noqa: ANN001
-    cfg = Config(
-        backend="mjx",  # the frames are checked against MJX's own geom positions below
+def page_config(**overrides) -> Config:  # noqa: ANN003
+    """One run of a Brax task with greedy queries to the person, small enough for a test."""
+    base = dict(
         num_envs=1,
         episode_length=100,
-        total_env_steps=200,
+        total_env_steps=100,
         learning_starts=50,
-        eval_every=100,
+        eval_every=50,
         num_eval_episodes=1,
         hidden_sizes=(32, 32),
         batch_size=32,
-        replay_capacity=200,
+        replay_capacity=100,
         window_size=10,
         traces_per_eval=5,
         state_sample_size=16,
         strategy="greedy",
+    )
+    return Config(**(base | overrides))
+
+
+@pytest.mark.slow
+def test_halfcheetah_page_end_to_end(browser, tmp_path: Path) -> None:  # noqa: ANN001
+    cfg = page_config(
+        backend="mjx",  # the frames are checked against MJX's own geom positions below
+        total_env_steps=200,
+        eval_every=100,
+        replay_capacity=200,
         demo_steps=2,
         budget=4,
     )
@@ -293,25 +303,7 @@ def test_second_tab_and_hand_back_on_toy(browser, tmp_path: Path) -> None:  # no
 @pytest.mark.slow
 def test_hopper_fall_is_shown_and_ends_the_demonstration(browser, tmp_path: Path) -> None:  # noqa: ANN001
     budget, c = 12, 10
-    cfg = Config(
-        env_name="hopper",
-        backend="mujoco",
-        num_envs=1,
-        episode_length=100,
-        total_env_steps=100,
-        learning_starts=50,
-        eval_every=50,
-        num_eval_episodes=1,
-        hidden_sizes=(32, 32),
-        batch_size=32,
-        replay_capacity=100,
-        window_size=10,
-        traces_per_eval=5,
-        state_sample_size=16,
-        strategy="greedy",
-        demo_steps=c,
-        budget=budget,
-    )
+    cfg = page_config(env_name="hopper", backend="mujoco", demo_steps=c, budget=budget)
     training = Training(cfg, tmp_path)
     page = browser.new_page(viewport={"width": 1400, "height": 860})
     page.goto(training.server.url)
