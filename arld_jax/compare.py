@@ -261,10 +261,7 @@ def plain_reading(run_dir: str | Path | RunDir) -> str:
         return str(run_field(run, cells[row["cell"]].runs[0], name, default))
 
     def name(row: dict[str, Any]) -> str:
-        agent = paper_name(
-            field(row, "strategy", "none"), run.agent, field(row, "uncertainty", "intrinsic")
-        )
-        return f"{agent} ({row['cell_label']})" if row["cell_label"] else agent
+        return str(row["name"])  # the paper's names (`summary.cell_name`): "BQSAC b=0.1"
 
     plain = {
         field(r, "uncertainty", "intrinsic"): r
@@ -310,7 +307,7 @@ def plain_reading(run_dir: str | Path | RunDir) -> str:
             )
     expert = expert_return(run)
     if math.isfinite(expert):
-        above = [r["cell_label"] for r in rows if _interval(r)[0] > expert]
+        above = [r["name"] for r in rows if _interval(r)[0] > expert]
         lines.append(
             f"The expert's return is {expert:,.0f}; "
             + (
@@ -327,10 +324,7 @@ def plain_reading(run_dir: str | Path | RunDir) -> str:
     if flipped:
         lines.append(
             "Upside down in more than 5% of the late states (the flipped gait): "
-            + ", ".join(
-                f"{r['cell_label'] or 'base'} ({100 * r['upside_down_late_mean']:.0f}%)"
-                for r in flipped
-            )
+            + ", ".join(f"{r['name']} ({100 * r['upside_down_late_mean']:.0f}%)" for r in flipped)
             + "."
         )
     if has_falls(run):
@@ -338,7 +332,7 @@ def plain_reading(run_dir: str | Path | RunDir) -> str:
             "Falls (share of the late training episodes that ended by a fall, and their mean "
             "length): "
             + ", ".join(
-                f"{r['cell_label'] or 'base'} {100 * r['fell_late_mean']:.0f}% "
+                f"{r['name']} {100 * r['fell_late_mean']:.0f}% "
                 f"({r['episode_length_late_mean']:,.0f} steps)"
                 for r in rows
                 if math.isfinite(r["fell_late_mean"])

@@ -681,21 +681,18 @@ def test_plain_reading_names_which_cells_differ(tmp_path: Path) -> None:
     cells = [{"strategy": "none"}, {"strategy": "bernoulli"}, {"strategy": "active"}]
     path = write_run_dir(tmp_path / "r", cells, {"strategy": ["none", "bernoulli", "active"]})
     text = compare.plain_reading(path)
-    assert (
-        "- BQSAC (strategy=bernoulli): 810 [785, 835]; above SAC (strategy=none) "
-        "(+400, Welch [377, 423])." in text
-    )
-    assert "- AQSAC (strategy=active): 1,210 [1,185, 1,235]; above SAC" in text
-    assert "Best querying cell: AQSAC (strategy=active)." in text
-    assert "Asking for demonstrations beat not asking: BQSAC (strategy=bernoulli), AQSAC" in text
+    assert "- BQSAC b=0.2: 810 [785, 835]; above SAC (+400, Welch [377, 423])." in text
+    assert "- AQSAC t_query=0.1: 1,210 [1,185, 1,235]; above SAC" in text
+    assert "Best querying cell: AQSAC t_query=0.1." in text
+    assert "Asking for demonstrations beat not asking: BQSAC b=0.2, AQSAC t_query=0.1" in text
     assert "The expert's return is 3,000; no cell's interval is above it." in text
     m = dict(np.load(path / "metrics.npz"))
     m["eval_return"][6:9, -1] = [0.0, 2000.0, 4000.0]  # AQSAC's seeds far apart
     np.savez(path / "metrics.npz", **m)
     text = compare.plain_reading(path)
-    assert "- AQSAC (strategy=active): 2,000 [" in text
-    assert "not separated from SAC (strategy=none) (+1,590, Welch [-3,378, 6,558])." in text
-    assert "beat not asking: BQSAC (strategy=bernoulli) ended above" in text
+    assert "- AQSAC t_query=0.1: 2,000 [" in text
+    assert "not separated from SAC (+1,590, Welch [-3,378, 6,558])." in text
+    assert "beat not asking: BQSAC b=0.2 ended above" in text
     # Without a separated cell the reading says so.
     m["eval_return"][3:6, -1] = [0.0, 1000.0, 2000.0]  # BQSAC's seeds far apart too
     np.savez(path / "metrics.npz", **m)
