@@ -247,7 +247,9 @@ def main(argv: list[str] | None = None) -> None:
             raise SystemExit(f"error: {err}") from None
         print(json.dumps(r, indent=1))
         spec = TASKS[r["env_name"]]
-        health = [f"{100 * r['upside_down']:.1f}% of states upside down"] * spec.has_gait_rule
+        health = []
+        if spec.has_gait_rule:
+            health.append(f"{100 * r['upside_down']:.1f}% of states upside down")
         if spec.can_terminate:
             health.append(
                 f"{100 * r['fell']:.0f}% of episodes fell (mean length {r['episode_length']:.0f})"

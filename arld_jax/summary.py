@@ -179,9 +179,11 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
             row[name] = run_field(run, cell.runs[0], name)
         row["n_seeds"] = int(idx.size)
         row["final_return_mean"], row["final_return_ci95"] = mean_ci95(final)
-        iqm_interval = iqm_ci95(final)
+        iqm, lo, hi = iqm_ci95(final)
         row["final_return_iqm"], row["final_return_iqm_lo"], row["final_return_iqm_hi"] = (
-            iqm_interval
+            iqm,
+            lo,
+            hi,
         )
         row["auc_mean"], row["auc_ci95"] = mean_ci95(auc[idx])
         row["demos_used_mean"], row["demos_used_ci95"] = mean_ci95(final_demos)
