@@ -1,5 +1,5 @@
 """Pairwise comparisons of the paper's strategies across seeds (AQSAC - BQSAC, AQSAC - SAC, ...:
-the differences of final return and AUC with Welch's and rliable's bootstrap 95% intervals, and the
+the differences of final return and AUC with Welch's and the stratified bootstrap's 95% intervals, and the
 probability of improvement), of two run directories cell by cell, and the plain-language reading.
 """
 
@@ -84,7 +84,7 @@ def reading_steps(run: RunDir) -> list[int]:
 
 
 def compare(run_dir: str | Path | RunDir, reps: int = BOOTSTRAP_REPS, seed: int = 0) -> list[dict]:
-    """Pairwise differences of `comparison_pairs` with stratified-bootstrap 95% CIs (rliable,
+    """Pairwise differences of `comparison_pairs` with stratified-bootstrap 95% CIs (rliable's,
     Agarwal et al. 2021): for the final and the area-under-curve return, and the return at each of
     `reading_steps`, the difference of the cells' means over seeds and the probability that a run
     of a beats a run of b. Rows: pair, metric and the keys of `bootstrap_difference`."""
@@ -172,7 +172,7 @@ def compare_runs(
 
 
 INTERVALS = (
-    f"each with a 95% stratified-bootstrap CI (rliable, {BOOTSTRAP_REPS:,} resamples of the seeds, "
+    f"each with a 95% stratified-bootstrap CI (rliable's percentile method, {BOOTSTRAP_REPS:,} resamples of the seeds, "
     "numpy seed 0), and the difference's Welch t 95% CI. With 5 seeds per side the bootstrap "
     "interval of a difference is too narrow: where there was no difference it excluded 0 in 12% "
     "of simulated pairs, not 5% (Welch's: 5%; `experiments/stats/interval_coverage.md`). Read a "

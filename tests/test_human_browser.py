@@ -144,7 +144,7 @@ def page_config(**overrides) -> Config:  # noqa: ANN003
 @pytest.mark.slow
 def test_halfcheetah_page_end_to_end(browser, tmp_path: Path) -> None:  # noqa: ANN001
     cfg = page_config(
-        backend="mjx",  # the frames are checked against MJX's own geom positions below
+        backend="mujoco",  # the frames are checked against the simulated bodies below
         total_env_steps=200,
         eval_every=100,
         replay_capacity=200,
@@ -229,7 +229,8 @@ def test_halfcheetah_page_end_to_end(browser, tmp_path: Path) -> None:  # noqa: 
     )
 
     # The frames are the simulated bodies: the drawn "now" frame is the kinematics of the
-    # recorded state, and host kinematics of an observation match MJX's own geom positions.
+    # recorded state, and the kinematics of an observation put the bodies where the physics had
+    # them (the env's state holds every body's position; MJX's agree, tests/test_envs.py).
     from arld_jax.human.frames import halfcheetah_frame, kinematics, qpos_from_obs
 
     drawn = halfcheetah_frame(np.asarray(records[3].obs))["segments"]
@@ -237,10 +238,10 @@ def test_halfcheetah_page_end_to_end(browser, tmp_path: Path) -> None:  # noqa: 
     np.testing.assert_allclose(
         [f[1:] for f in now_frame], [[s["x1"], s["z1"], s["x2"], s["z2"]] for s in drawn], atol=1e-5
     )
-    mjx_data = state.env.inner.pipeline_state
-    qpos = np.asarray(mjx_data.qpos)[0]
+    physics = state.env.inner.pipeline_state
+    qpos = np.asarray(physics.q)[0]
     host = kinematics(qpos_from_obs(np.asarray(state.env.obs)[0], x=float(qpos[0])))
-    np.testing.assert_allclose(host.geom_xpos, np.asarray(mjx_data.geom_xpos)[0], atol=1e-4)
+    np.testing.assert_allclose(host.xpos[1:], np.asarray(physics.x.pos)[0], atol=1e-4)
 
 
 def test_second_tab_and_hand_back_on_toy(browser, tmp_path: Path) -> None:  # noqa: ANN001

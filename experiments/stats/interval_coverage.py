@@ -1,7 +1,7 @@
 """How often do `compare`'s two 95% intervals of a difference of means exclude 0 when there is no
 difference? Two samples of n seeds are drawn from the same distribution, many times; each pair goes
-through `stats.bootstrap_difference` (rliable's stratified percentile bootstrap, as `compare`
-calls it, but 2,000 resamples instead of 20,000 to keep this to minutes) and `stats.welch_ci95`.
+through `stats.bootstrap_difference` (the stratified percentile bootstrap of rliable, as `compare`
+calls it: 20,000 resamples) and `stats.welch_ci95`.
 A calibrated 95% interval excludes 0 in about 5% of the pairs.
 
     python experiments/stats/interval_coverage.py > experiments/stats/interval_coverage.md
@@ -15,9 +15,9 @@ import sys
 import numpy as np
 
 from arld_jax import stats
+from arld_jax.stats import BOOTSTRAP_REPS as REPS
 
 SIMS = 1000
-REPS = 2000
 DRAWS = {
     "normal": lambda rng, n: rng.normal(size=n),
     # skewed, like returns where a few seeds fail: lognormal with sigma 1
@@ -30,8 +30,8 @@ def main() -> None:
     print("# Do the 95% intervals of `compare` hold their level with few seeds?\n")
     print(f"Command: `python {' '.join(sys.argv)} > experiments/stats/interval_coverage.md`.\n")
     print(f"Two samples of n seeds drawn from one distribution, {SIMS:,} times per row (numpy seed "
-          f"0); each pair through `stats.bootstrap_difference` (rliable's stratified percentile "
-          f"bootstrap, as `compare` calls it, with {REPS:,} resamples instead of 20,000) and "
+          f"0); each pair through `stats.bootstrap_difference` (the stratified percentile bootstrap "
+          f"of rliable, as `compare` calls it, {REPS:,} resamples) and "
           "`stats.welch_ci95`. With no difference, a calibrated 95% interval excludes 0 in "
           "about 5% of the pairs.\n")  # fmt: skip
     print("| draws | seeds per side | bootstrap CI excludes 0 | Welch t CI excludes 0 |")
