@@ -119,7 +119,7 @@ def probability_of_improvement(x: np.ndarray, y: np.ndarray) -> Any:
     Runs on the last axis, so one call scores every bootstrap resample ([reps, n] against
     [reps, m] gives [reps]); 1-D samples give a float."""
     x, y = np.asarray(x, np.float64)[..., :, None], np.asarray(y, np.float64)[..., None, :]
-    p = np.mean((x > y) + 0.5 * (x == y), axis=(-2, -1))
+    p = np.mean(x > y, axis=(-2, -1)) + 0.5 * np.mean(x == y, axis=(-2, -1))
     return float(p) if p.ndim == 0 else p
 
 
