@@ -1,11 +1,11 @@
 """The demonstration page end to end, in real headless Chromium (Debian's /usr/bin/chromium driven by
 the `playwright` package; no browser download).
 
-1. MJX HalfCheetah (one compile): greedy, C = 2, budget 4. The page shows real cheetah frames; the
+1. HalfCheetah on MuJoCo's C engine: greedy, C = 2, budget 4. The page shows real cheetah frames; the
    test moves knobs by keyboard and by typing, uses "start from the agent's action", submits, and
    checks that the final TrainState's replay (items with is_demo == 1) and the saved dataset hold
-   exactly the actions the page sent, and that the frames are the simulated bodies (MJX geom
-   positions). Set ARLD_SCREENSHOT=docs/demonstrate.png to save the page during the last query.
+   exactly the actions the page sent, and that the frames are the simulated bodies (the env's
+   body positions). Set ARLD_SCREENSHOT=docs/demonstrate.png to save the page during the last query.
 2. Toy env: a second tab is refused, takes over explicitly, and hands a query back.
 3. Hopper on MuJoCo's C engine (a task whose episodes end): the person drives it into a fall; the
    page announces the fall and draws the fallen state, the demonstration ends with the episode,

@@ -324,7 +324,7 @@ jax.tree_util.register_pytree_node(_Node, lambda n: ((n.x,), n.static), lambda s
 def test_state_layout_is_the_same_in_every_process():
     """The fingerprint must not depend on where objects live: MJX's static pytree data prints as
     "<... object at 0x...>", and with the address in it no MJX run could resume in a new process
-    (seen in session 5). Equal structure and shapes -> equal fingerprint; other shapes -> not."""
+    (seen before). Equal structure and shapes -> equal fingerprint; other shapes -> not."""
     a = {"env": _Node(np.zeros((2, 3, 4)), _Static())}
     b = {"env": _Node(np.zeros((2, 3, 4)), _Static())}
     assert str(jax.tree.structure(a)) != str(jax.tree.structure(b))  # the addresses differ

@@ -354,7 +354,7 @@ def test_a_run_axis_of_one_is_squeezed_not_vmapped():
 def test_compiled_loop_copies_neither_the_replay_nor_the_agent_state(num_runs: int):
     """Performance structure, not timing: in the chunk that run.py compiles (seed-vmapped; a single
     run squeezed, `over_runs`), XLA must update the replay and the AgentState in place.
-    Regressions this catches (each seen in session 5, benchmarks/README.md): a `lax.cond` around
+    Regressions this catches (each seen before, benchmarks/README.md): a `lax.cond` around
     the update copied the whole AgentState at every iteration (about 2x its size in loop copies
     here), and without `compiler_options()` the sum tree was copied in the loop (at 1M x 8 seeds
     that made the replay work 12x slower)."""
