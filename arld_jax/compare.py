@@ -1,6 +1,7 @@
 """Pairwise comparisons of the paper's strategies across seeds (AQSAC - BQSAC, AQSAC - SAC, ...:
-the differences of final return and AUC with Welch's and the stratified bootstrap's 95% intervals, and the
-probability of improvement), of two run directories cell by cell, and the plain-language reading.
+the differences of final return and AUC with Welch's and the stratified bootstrap's 95% intervals,
+and the probability of improvement), of two run directories cell by cell, and the plain-language
+reading.
 """
 
 from __future__ import annotations
@@ -172,11 +173,12 @@ def compare_runs(
 
 
 INTERVALS = (
-    f"each with a 95% stratified-bootstrap CI (rliable's percentile method, {BOOTSTRAP_REPS:,} resamples of the seeds, "
-    "numpy seed 0), and the difference's Welch t 95% CI. With 5 seeds per side the bootstrap "
-    "interval of a difference is too narrow: where there was no difference it excluded 0 in 12% "
-    "of simulated pairs, not 5% (Welch's: 5%; `experiments/stats/interval_coverage.md`). Read a "
-    "difference as separated when Welch's interval excludes 0."
+    "each with a 95% stratified-bootstrap CI (rliable's percentile method, "
+    f"{BOOTSTRAP_REPS:,} resamples of the seeds, numpy seed 0), and the difference's Welch t 95% "
+    "CI. With 5 seeds per side the bootstrap interval of a difference is too narrow: where there "
+    "was no difference it excluded 0 in 12% of simulated pairs, not 5% (Welch's: 5%; "
+    "`experiments/stats/interval_coverage.md`). Read a difference as separated when Welch's "
+    "interval excludes 0."
 )
 """What `format_comparison`'s intervals are and how to read them (above every comparison table)."""
 

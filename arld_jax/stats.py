@@ -2,7 +2,8 @@
 and the stratified bootstrap of rliable, vectorised), the interquartile mean with its bootstrap
 interval, the probability of improvement, and the area under a curve.
 
-Numpy and scipy only (rliable, the field's reference, checks them in the tests); the run directories' layout is `arld_jax.rundir`'s.
+Numpy and scipy only (rliable, the field's reference, checks them in the tests); the run
+directories' layout is `arld_jax.rundir`'s.
 """
 
 from __future__ import annotations
@@ -126,6 +127,15 @@ def probability_of_improvement(x: np.ndarray, y: np.ndarray) -> Any:
 BOOTSTRAP_REPS = 20_000
 """Resamples of the seeds behind every bootstrap interval `compare` and `compare_runs` give."""
 
+PERCENTILES_95 = (2.5, 97.5)
+"""The ends of a 95% percentile-bootstrap interval (rliable's default method, through arch)."""
+
+
+def resamples(x: np.ndarray, reps: int, rng: np.random.Generator) -> np.ndarray:
+    """`reps` resamples of the runs `x` [n] with replacement, [reps, n]: one stratum of rliable's
+    stratified bootstrap (each side of a comparison is resampled apart)."""
+    return x[rng.integers(0, x.size, (reps, x.size))]
+
 
 def iqm(values: np.ndarray) -> float:
     """The interquartile mean: the mean of the runs left after cutting 25% at each end (rliable's
@@ -147,9 +157,9 @@ def iqm_ci95(
     if x.size < 2:
         return iqm(x), math.nan, math.nan
     n, cut = x.size, int(0.25 * x.size)  # scipy's trim_mean cuts int(0.25 n) at each end
-    samples = np.sort(x[np.random.default_rng(seed).integers(0, n, (reps, n))], axis=1)
+    samples = np.sort(resamples(x, reps, np.random.default_rng(seed)), axis=1)
     boot = samples[:, cut : n - cut].mean(axis=1)
-    lo, hi = np.percentile(boot, [2.5, 97.5])
+    lo, hi = np.percentile(boot, PERCENTILES_95)
     return iqm(x), float(lo), float(hi)
 
 
@@ -164,12 +174,10 @@ def bootstrap_difference(x: np.ndarray, y: np.ndarray, reps: int, seed: int) -> 
     x = np.asarray(x, np.float64).ravel()
     y = np.asarray(y, np.float64).ravel()
     rng = np.random.default_rng(seed)
-    xs = x[rng.integers(0, x.size, (reps, x.size))]  # [reps, n_a]
-    ys = y[rng.integers(0, y.size, (reps, y.size))]  # [reps, n_b]
+    xs, ys = resamples(x, reps, rng), resamples(y, reps, rng)  # [reps, n_a], [reps, n_b]
     diffs = xs.mean(axis=1) - ys.mean(axis=1)
-    p_improve = probability_of_improvement(xs, ys)
-    bounds = np.percentile(np.stack([diffs, p_improve]), [2.5, 97.5], axis=1).T  # arch's percentile
-    (diff_lo, diff_hi), (p_lo, p_hi) = bounds
+    boot = np.stack([diffs, probability_of_improvement(xs, ys)])
+    (diff_lo, diff_hi), (p_lo, p_hi) = np.percentile(boot, PERCENTILES_95, axis=1).T
     welch_lo, welch_hi = welch_ci95(x, y)
     return dict(diff=float(x.mean() - y.mean()), diff_lo=float(diff_lo), diff_hi=float(diff_hi),
                 welch_lo=welch_lo, welch_hi=welch_hi,

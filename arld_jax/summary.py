@@ -180,11 +180,7 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
         row["n_seeds"] = int(idx.size)
         row["final_return_mean"], row["final_return_ci95"] = mean_ci95(final)
         iqm, lo, hi = iqm_ci95(final)
-        row["final_return_iqm"], row["final_return_iqm_lo"], row["final_return_iqm_hi"] = (
-            iqm,
-            lo,
-            hi,
-        )
+        row.update(final_return_iqm=iqm, final_return_iqm_lo=lo, final_return_iqm_hi=hi)
         row["auc_mean"], row["auc_ci95"] = mean_ci95(auc[idx])
         row["demos_used_mean"], row["demos_used_ci95"] = mean_ci95(final_demos)
         row["upside_down_late_mean"], row["upside_down_late_ci95"] = mean_ci95(flipped[idx])
