@@ -380,8 +380,7 @@ def _arld_400k_config() -> Config:
 def preset_arld_400k() -> Sweep:
     """The paper's comparison at its own length (Fig. 4, sigma_theta): SAC, GQSAC, BQSAC with
     b = 0.1 and b = 0.2, AQSAC with t_query = 0.1, 5 seeds, 400k env steps at 1 env, budget
-    10,000, C physics (25 runs in one program; about 20 hours on this 2-core CPU, 14-18 minutes per
-    5,000-step chunk)."""
+    10,000, C physics (25 runs in one program; about 20 hours on a 2-core CPU, experiments/README.md)."""
     return Sweep(
         cfg=_arld_400k_config(),
         sweep={"strategy": STRATEGIES, "query_prob": (0.1, 0.2)},
