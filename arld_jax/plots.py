@@ -25,6 +25,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import EngFormatter
 
 from arld_jax.agents import REGISTRY
+from arld_jax.compare import comparison_pairs, reading_steps
 from arld_jax.config import SHORT_NAMES, STRATEGIES, UNCERTAINTIES
 from arld_jax.rundir import (
     Cell,
@@ -37,7 +38,7 @@ from arld_jax.rundir import (
     run_field,
     swept_fields,
 )
-from arld_jax.stats import mean_ci95, mean_ci95_columns
+from arld_jax.stats import mean_ci95, mean_ci95_columns, welch_ci95
 from arld_jax.summary import cell_name, has_falls, has_gait_rule
 
 DPI = 110
@@ -543,6 +544,63 @@ def fig_falls(run: Run) -> Figure | None:
     return _cell_bands(run, panels, "Falls and episode length, mean and 95% CI over seeds")
 
 
+INTRINSIC_MINUS_EXTRINSIC = "intrinsic - extrinsic"
+"""`fig_pairs`' panel of the pairs of one strategy under the two uncertainty measures."""
+
+
+def fig_pairs(run: Run) -> Figure | None:
+    """The paper's comparisons along the run: for each pair of `compare.comparison_pairs`
+    (AQSAC - BQSAC, ..., intrinsic - extrinsic), the difference of the cells' mean evaluation
+    returns over seeds at every evaluation, with Welch's 95% interval as its band (the reading
+    rule of `comparison.md`), and dotted lines where `comparison.md` also reads the pairs (a quarter
+    and half of the run). So a reader sees whether, and when, a ranking changes with the length of
+    the run. One panel per uncertainty measure for the pairs with an active cell, one for
+    intrinsic - extrinsic. Runs with pairs only."""
+    if run.periods == 0:
+        return None
+    pairs = comparison_pairs(run)
+    if not pairs:
+        return None
+    eval_return = np.asarray(run.metrics["eval_return"], np.float64)
+    steps = env_steps_axis(run)
+    colors = _cell_colors(group_cells(run))
+    panels: dict[str, list[tuple[str, Cell, Cell]]] = {}
+    for name, a, b in pairs:
+        same_strategy = _field(run, a, "strategy", "none") == _field(run, b, "strategy", "none")
+        panel = (
+            INTRINSIC_MINUS_EXTRINSIC
+            if same_strategy
+            else _field(run, a, "uncertainty", "intrinsic")
+        )
+        panels.setdefault(panel, []).append((name, a, b))
+    fig, axes = _new_figure(ncols=len(panels))
+    for ax, (panel, members) in zip(axes, panels.items(), strict=True):
+        for name, a, b in members:
+            x, y = eval_return[a.runs], eval_return[b.runs]
+            diff = x.mean(axis=0) - y.mean(axis=0)
+            lo, hi = np.array([welch_ci95(x[:, p], y[:, p]) for p in range(len(steps))]).T
+            color = colors[(a if panel == INTRINSIC_MINUS_EXTRINSIC else b).cell]
+            ax.plot(steps, diff, color=color, lw=1.5, label=name)
+            band = np.isfinite(lo)
+            if band.any():
+                ax.fill_between(steps, lo, hi, where=band, color=color, alpha=0.18, lw=0)
+        ax.axhline(0.0, color="black", lw=1.0)
+        for at in reading_steps(run):
+            ax.axvline(at, color="grey", ls=":", lw=1.0)
+        if panel == INTRINSIC_MINUS_EXTRINSIC:
+            title = "Each strategy, intrinsic − extrinsic uncertainty"
+        else:
+            title = uncertainty_title(run, panel, panel)
+        ax.set_title(title, fontsize=10)
+        ax.set_ylabel("a − b, evaluation return")
+        _steps_axis(ax)
+        _legend(ax)
+    fig.suptitle(
+        "Pairs along the run: difference of mean return, Welch's 95% CI" + _partial_note(run)
+    )
+    return fig
+
+
 FIGURES: dict[str, Callable[[Run], Figure | None]] = {
     "fig3_uncertainty": fig3_uncertainty,
     "fig4_5_returns": fig4_5_returns,
@@ -552,6 +610,7 @@ FIGURES: dict[str, Callable[[Run], Figure | None]] = {
     "fig9_budget": fig9_budget,
     "gait": fig_gait,
     "falls": fig_falls,
+    "pairs": fig_pairs,
 }
 """File stem -> figure function, in paper order."""
 

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from scipy import stats
 from test_results import (
     BUDGET,
     DEMO_RATE,
@@ -386,6 +387,65 @@ def test_fig8_projects_visited_and_queried_states_on_the_visited_pca(sac_dir: Pa
             signs = np.sign(np.sum(got * want, axis=0))
             np.testing.assert_allclose(got, want * signs, atol=1e-9)
         assert (ax.get_xlabel(), ax.get_ylabel()) == ("PC 1", "PC 2")
+
+
+# ---------------------------------------------------------------- the pairs along the run
+
+PAIR_OFFSETS = np.array([0.0, -150.0, 240.0])
+"""Added to AQSAC's seeds (0, 1, 2) in `test_pairs_...`: unequal variances, so Welch's df is not
+n_a + n_b - 2."""
+
+
+def test_pairs_draw_each_difference_with_welchs_interval_at_every_evaluation(
+    sac_dir: Path,
+) -> None:
+    metrics, cells = _files(sac_dir)
+    metrics["eval_return"][cells[3]] += PAIR_OFFSETS[:, None]
+    np.savez(sac_dir / "metrics.npz", **metrics)
+    fig = _make(plots.fig_pairs(rundir.load_run(sac_dir)))
+    (ax,) = fig.axes
+    names = ["AQSAC - BQSAC", "AQSAC - GQSAC", "AQSAC - SAC"]
+    assert _legend(ax) == names
+    assert ax.get_title() == "Intrinsic uncertainty: SAC σθ(s)"
+    steps = metrics["env_steps"][0]
+    ret = metrics["eval_return"]
+    lines = _lines(ax)
+    for i, (name, b) in enumerate(zip(names, (2, 1, 0), strict=True)):
+        x, y = lines[name]
+        np.testing.assert_array_equal(x, steps)
+        a_runs, b_runs = ret[cells[3]], ret[cells[b]]
+        np.testing.assert_allclose(y, a_runs.mean(axis=0) - b_runs.mean(axis=0))
+        # 100 (4 - (b + 1)) (p + 1) apart, plus the mean of PAIR_OFFSETS
+        np.testing.assert_allclose(y, 100.0 * (3 - b) * np.arange(1, 5) + 30.0)
+        band = _band(ax, i)
+        assert sorted(band) == list(steps)
+        for p, s in enumerate(steps):
+            welch = stats.ttest_ind(a_runs[:, p], b_runs[:, p], equal_var=False)
+            want = welch.confidence_interval(0.95)
+            np.testing.assert_allclose(band[s], (want.low, want.high), rtol=1e-6)
+            assert want.low < y[p] - 180  # wide: the offsets' spread, not the cells' gap
+    zero = [line for line in ax.get_lines() if list(line.get_ydata()) == [0.0, 0.0]]
+    assert len(zero) == 1
+    # dotted where comparison.md also reads the pairs: a quarter and half of the run
+    dotted = [line.get_xdata()[0] for line in ax.get_lines() if line.get_linestyle() == ":"]
+    assert dotted == [1000, 2000]
+
+
+def test_pairs_split_active_by_uncertainty_and_intrinsic_against_extrinsic(
+    full_dir: Path,
+) -> None:
+    fig = _make(plots.fig_pairs(rundir.load_run(full_dir)))
+    intrinsic, extrinsic, both = fig.axes
+    assert _legend(intrinsic) == ["AQSAC t_query=0.1 - SAC", "AQSAC t_query=0.3 - SAC"]
+    assert _legend(extrinsic) == [
+        "AQNoisySAC - BQNoisySAC b=0.2",
+        "AQNoisySAC - BQNoisySAC b=0.4",
+    ]
+    assert _legend(both) == ["AQSAC t_query=0.1 - AQNoisySAC"]
+    assert both.get_title() == "Each strategy, intrinsic − extrinsic uncertainty"
+    x, _ = _lines(both)["AQSAC t_query=0.1 - AQNoisySAC"]
+    np.testing.assert_array_equal(x, [1000, 2000, 3000])  # the periods present
+    assert fig.get_suptitle().endswith("[partial: 3,000 of 4,000 env steps]")
 
 
 # ---------------------------------------------------------------- the gait
