@@ -365,8 +365,8 @@ def _arld_400k_config() -> Config:
     - physics: Brax's HalfCheetah stepped by MuJoCo's C engine (`backend='mujoco'`), not Gym's
       HalfCheetah: the same model family and reward (forward velocity minus 0.1 x control cost), the
       step this CPU can afford for 400k steps x 25 runs;
-    - seeds: 5 (0-4) instead of 10, the cores' limit (the 25 runs take about a day here); seeds 5-9 run
-      as a second directory with `--seeds 5,6,7,8,9` and pool with `compare A,B C,D`;
+    - seeds: 5 (0-4) instead of 10, the cores' limit (the 25 runs take about a day here); seeds
+      5-9 run as a second directory with `--seeds 5,6,7,8,9` and pool with `compare A,B C,D`;
     - the grids: A.1 tunes t_query over {0.05, 0.1, ..., 0.7}, C over {1, 2, 3, 5, 10} and b; here
       t_query = 0.1 (the paper's best), b in {0.1, 0.2} (4.3 names 0.1 the best b, Fig. 4 plots 0.2)
       and C = 1 (the start of its grid, as in the `arld` preset);
@@ -380,7 +380,8 @@ def _arld_400k_config() -> Config:
 def preset_arld_400k() -> Sweep:
     """The paper's comparison at its own length (Fig. 4, sigma_theta): SAC, GQSAC, BQSAC with
     b = 0.1 and b = 0.2, AQSAC with t_query = 0.1, 5 seeds, 400k env steps at 1 env, budget
-    10,000, C physics (25 runs in one program; 20-30 hours on a 2-core CPU, experiments/README.md)."""
+    10,000, C physics (25 runs in one program; 20-30 hours on a 2-core CPU,
+    experiments/README.md)."""
     return Sweep(
         cfg=_arld_400k_config(),
         sweep={"strategy": STRATEGIES, "query_prob": (0.1, 0.2)},
