@@ -137,6 +137,16 @@ def _by_uncertainty(run: Run, cells: list[Cell]) -> list[tuple[str | None, list[
     return [(u, [c for c in cells if _field(run, c, "uncertainty") == u]) for u in present]
 
 
+def _interval_band(
+    ax: Axes, x: np.ndarray, lo: np.ndarray, hi: np.ndarray, color: Any, alpha: float = 0.18
+) -> None:
+    """Shade a 95% interval [lo, hi] along x where it is defined (a point with one seed, or one
+    run per side, has none: nan)."""
+    defined = np.isfinite(lo) & np.isfinite(hi)
+    if defined.any():
+        ax.fill_between(x, lo, hi, where=defined, color=color, alpha=alpha, lw=0)
+
+
 def _legend(ax: Axes) -> None:
     """A small legend, two columns when crowded."""
     handles, _ = ax.get_legend_handles_labels()
@@ -267,11 +277,7 @@ def fig4_5_returns(run: Run) -> Figure | None:
             mean, half = mean_ci95_columns(metrics["eval_return"][cell.runs])
             color = colors[cell.cell]
             ax.plot(steps, mean, color=color, lw=1.5, marker=marker, label=cell_name(run, cell))
-            band = np.isfinite(half)
-            if band.any():
-                ax.fill_between(
-                    steps, mean - half, mean + half, where=band, color=color, alpha=0.18, lw=0
-                )
+            _interval_band(ax, steps, mean - half, mean + half, color)
         if math.isfinite(expert):
             ax.axhline(expert, color="black", lw=1.5, label=f"expert ({expert:.0f})")
         title = uncertainty_title(run, uncertainty, "Evaluation return")
@@ -493,11 +499,7 @@ def _cell_bands(run: Run, panels: list[tuple[str, str, str, float]], suptitle: s
             mean, half = mean_ci95_columns(scale * np.asarray(metrics[name], float)[cell.runs])
             color = colors[cell.cell]
             ax.plot(steps, mean, color=color, lw=1.5, label=cell_name(run, cell))
-            band = np.isfinite(half)
-            if band.any():
-                ax.fill_between(
-                    steps, mean - half, mean + half, where=band, color=color, alpha=0.18, lw=0
-                )
+            _interval_band(ax, steps, mean - half, mean + half, color)
         ax.set_ylabel(ylabel)
         ax.set_title(title, fontsize=10)
         _steps_axis(ax)
@@ -581,9 +583,7 @@ def fig_pairs(run: Run) -> Figure | None:
             lo, hi = np.array([welch_ci95(x[:, p], y[:, p]) for p in range(len(steps))]).T
             color = colors[(a if panel == INTRINSIC_MINUS_EXTRINSIC else b).cell]
             ax.plot(steps, diff, color=color, lw=1.5, label=name)
-            band = np.isfinite(lo)
-            if band.any():
-                ax.fill_between(steps, lo, hi, where=band, color=color, alpha=0.18, lw=0)
+            _interval_band(ax, steps, lo, hi, color)
         ax.axhline(0.0, color="black", lw=1.0)
         for at in reading_steps(run):
             ax.axvline(at, color="grey", ls=":", lw=1.0)
@@ -671,11 +671,7 @@ def fig1_agents(group_dir: str | Path) -> Figure | None:
             color = STRATEGY_COLORS.get(strategy, "0.4")
             mean, half = mean_ci95_columns(run.metrics["eval_return"][cell.runs])
             ax.plot(steps, mean, color=color, ls=style, lw=1.5, label=cell_name(run, cell))
-            band = np.isfinite(half)
-            if band.any():
-                ax.fill_between(
-                    steps, mean - half, mean + half, where=band, color=color, alpha=0.15, lw=0
-                )
+            _interval_band(ax, steps, mean - half, mean + half, color, alpha=0.15)
         expert = expert_return(run)
         if math.isfinite(expert):
             ax.axhline(expert, color="black", lw=1.2, label=f"expert ({expert:.0f})")
