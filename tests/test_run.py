@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -379,7 +380,8 @@ def test_compare_two_run_directories(uninterrupted, tmp_path, capsys):
     steps that are not evaluated in both and different evaluation schedules are clear errors."""
     _, full = uninterrupted
     other = tmp_path / "other"
-    sweep = _sweep(strategy="none,active", seeds="2,3")
+    # Other seeds, one cell fewer; the same number of runs, so the same compiled program.
+    sweep = _sweep(strategy="none,active", seeds="2,3,4")
     driver.run_sweep(sweep, other, _quiet(chunk_periods=4))
     rows = compare.compare_runs(full, other, at_steps=[1000])
     assert {r["pair"].split(" − ")[0].split(":")[1] for r in rows} == {
@@ -411,8 +413,11 @@ def test_compare_two_run_directories(uninterrupted, tmp_path, capsys):
         run.main(["compare", str(full), str(other), "--at", "lots"])
     with pytest.raises(SystemExit, match="not a run directory"):
         run.main(["compare", str(full), str(tmp_path)])
-    slower = tmp_path / "slower"
-    driver.run_sweep(_sweep(strategy="none", eval_every=1000), slower, _quiet(chunk_periods=2))
+    slower = tmp_path / "slower"  # `other` as if it evaluated every 1,000 steps: no second compile
+    shutil.copytree(other, slower)
+    config = json.loads((slower / rundir.CONFIG_FILE).read_text())
+    config["config"]["eval_every"] = 1000
+    (slower / rundir.CONFIG_FILE).write_text(json.dumps(config))
     with pytest.raises(ValueError, match="evaluates every 500 env steps"):
         compare.compare_runs(full, slower)
 
