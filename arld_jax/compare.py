@@ -84,15 +84,36 @@ def reading_steps(run: RunDir) -> list[int]:
     return [at for at in (total // 4, total // 2) if at in steps[:-1]]
 
 
-def compare(run_dir: str | Path | RunDir, reps: int = BOOTSTRAP_REPS, seed: int = 0) -> list[dict]:
+def evaluation_index(steps: Sequence[int], at: int) -> int:
+    """The index of the evaluation at `at` env steps among `steps`; ValueError naming the
+    evaluations there are when there is none at `at`."""
+    hits = np.flatnonzero(np.asarray(steps) == at)
+    if len(hits) == 0:
+        raise ValueError(
+            f"no evaluation at {at:,} env steps: there are evaluations at "
+            f"{int(steps[0]):,}, {int(steps[1] if len(steps) > 1 else steps[0]):,}, ..., "
+            f"{int(steps[-1]):,}"
+        )
+    return int(hits[0])
+
+
+def compare(
+    run_dir: str | Path | RunDir,
+    reps: int = BOOTSTRAP_REPS,
+    seed: int = 0,
+    at_steps: Sequence[int] = (),
+) -> list[dict]:
     """Pairwise differences of `comparison_pairs` with stratified-bootstrap 95% CIs (rliable's,
     Agarwal et al. 2021): for the final and the area-under-curve return, and the return at each of
-    `reading_steps`, the difference of the cells' means over seeds and the probability that a run
-    of a beats a run of b. Rows: pair, metric and the keys of `bootstrap_difference`."""
+    `reading_steps` and `at_steps`, the difference of the cells' means over seeds and the
+    probability that a run of a beats a run of b. `run_dir` may be directories of one experiment
+    pooled by `pool_runs` (seeds 0-4 and 5-9 read as 10 seeds). Rows: pair, metric and the keys
+    of `bootstrap_difference`; ValueError when an evaluation of `at_steps` is missing."""
     run = as_run(run_dir)
     eval_return = np.asarray(run.metrics["eval_return"], dtype=np.float64)
     steps = [int(s) for s in env_steps_axis(run)]
-    values = {f"return at {at:,}": eval_return[:, steps.index(at)] for at in reading_steps(run)}
+    read_at = sorted(set(reading_steps(run)) | set(at_steps))
+    values = {f"return at {at:,}": eval_return[:, evaluation_index(steps, at)] for at in read_at}
     values |= {
         "final return": eval_return[:, -1],
         "AUC": area_under_curve(eval_return, env_steps_axis(run)),
@@ -150,14 +171,8 @@ def compare_runs(
     ret_b = np.asarray(b.metrics["eval_return"], np.float64)[:, :periods]
     metrics: list[tuple[str, int, Callable[[np.ndarray], np.ndarray]]] = []
     for at in at_steps:
-        hits = np.flatnonzero(steps == at)
-        if len(hits) == 0:
-            raise ValueError(
-                f"no evaluation at {at:,} env steps in both runs: they share evaluations at "
-                f"{int(steps[0]):,}, {int(steps[1] if len(steps) > 1 else steps[0]):,}, ..., "
-                f"{int(steps[-1]):,}"
-            )
-        metrics.append((f"return at {at:,}", at, lambda r, i=int(hits[0]): r[:, i]))
+        i = evaluation_index(steps, at)
+        metrics.append((f"return at {at:,}", at, lambda r, i=i: r[:, i]))
     metrics.append(("final return", int(steps[-1]), lambda r: r[:, -1]))
     metrics.append(("AUC", int(steps[-1]), lambda r: area_under_curve(r, steps)))
     rows = []

@@ -615,6 +615,40 @@ def test_compare_command_pools_comma_separated_directories(tmp_path: Path, capsy
         run.main(["compare", f"{a1},{tmp_path}", str(b)])
 
 
+def test_compare_command_with_one_side_reads_its_own_pairs_over_pooled_seeds(
+    tmp_path: Path, capsys
+) -> None:
+    """`compare A1,A2` without B: A's pairs of strategies (as its comparison.md has them) over the
+    seeds of both directories, at the evaluations both have (A2 stops one short) and at --at.
+    eval_return = 100 (cell + 1)(p + 1) + 10 seed: at the 3rd evaluation (p = 2) AQSAC (cell 2)
+    - SAC (cell 0) is 600, over seeds 0-4 pooled from 0-2 and 3-4; at 1,000 (p = 0), 200. A
+    directory without a pair, or an --at with no evaluation, is a clean error."""
+    from arld_jax import run  # the CLI (imports JAX, unlike the rest of this file)
+
+    strategies = ["none", "bernoulli", "active"]
+    cells, sweep = [{"strategy": s} for s in strategies], {"strategy": strategies}
+    a1 = write_run_dir(tmp_path / "a1", cells, sweep)
+    a2 = write_run_dir(tmp_path / "a2", cells, sweep, periods=3, seeds=(3, 4))
+    out = tmp_path / "pairs.md"
+    run.main(["compare", f"{a1},{a2}", "--at", "1000", "--out", str(out)])
+    text = capsys.readouterr().out
+    assert text == out.read_text()
+    assert "seeds [0, 1, 2, 3, 4]" in text and "at 3,000 env steps" in text
+    seeds = np.arange(5.0)
+    x, y = 100 * 3 * 3 + 10 * seeds, 100 * 1 * 3 + 10 * seeds
+    lo, hi = stats.welch_ci95(x, y)
+    final = next(line for line in text.splitlines() if "| AQSAC - SAC | final return" in line)
+    assert final.startswith("| AQSAC - SAC | final return | 5 / 5 | 600 [")
+    assert f"| [{lo:,.0f}, {hi:,.0f}] |" in final
+    assert "| AQSAC - SAC | return at 1,000 | 5 / 5 | 200 [" in text
+    assert "| AQSAC - BQSAC | final return | 5 / 5 | 300 [" in text
+    with pytest.raises(SystemExit, match="no evaluation at 4,000 env steps"):
+        run.main(["compare", f"{a1},{a2}", "--at", "4000"])
+    plain = write_run_dir(tmp_path / "plain", NONE_AND_BERNOULLI[:1], {})
+    with pytest.raises(SystemExit, match="no pair of strategies"):
+        run.main(["compare", str(plain)])
+
+
 def test_comparison_pairs_include_active_against_greedy(tmp_path: Path) -> None:
     """With a greedy cell, active is also compared with greedy (the paper's Fig. 1 names greedy
     among the passive strategies ARLD can fall behind), and the pair holds the right cells."""
