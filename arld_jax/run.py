@@ -219,14 +219,14 @@ def compare_command(args: argparse.Namespace) -> None:
     try:
         runs = [rundir.pool_runs(dirs) for dirs in sides]
         if len(runs) == 2:
-            title, where = f"{args.run_dir_a} against {args.run_dir_b}", ""
+            title, final_note = f"{args.run_dir_a} against {args.run_dir_b}", ""
             rows = compare.compare_runs(runs[0], runs[1], at)
         else:
             (run,) = runs
             if run.periods == 0:
                 raise ValueError(f"{run.where} has no evaluation yet")
             title = f"Pairwise comparison: {run.name}, seeds {run.config.get('seeds')}"
-            where = (
+            final_note = (
                 f" Final return: at {int(rundir.env_steps_axis(run)[-1]):,} env steps, the last "
                 "evaluation present in every directory."
             )
@@ -240,7 +240,7 @@ def compare_command(args: argparse.Namespace) -> None:
         f"Command: `{PROG} compare {' '.join(given)}"
         + (f" --at {args.at}" if args.at else "")
         + "`. a − b of the mean return over seeds and the probability that a run of a scores "
-        f"higher than a run of b, {compare.INTERVALS}{where}\n\n"
+        f"higher than a run of b, {compare.INTERVALS}{final_note}\n\n"
         + compare.format_comparison(rows)
         + "\n"
     )
