@@ -97,23 +97,15 @@ def evaluation_index(steps: Sequence[int], at: int) -> int:
     return int(hits[0])
 
 
-def compare(
-    run_dir: str | Path | RunDir,
-    reps: int = BOOTSTRAP_REPS,
-    seed: int = 0,
-    at_steps: Sequence[int] = (),
-) -> list[dict]:
+def compare(run_dir: str | Path | RunDir, reps: int = BOOTSTRAP_REPS, seed: int = 0) -> list[dict]:
     """Pairwise differences of `comparison_pairs` with stratified-bootstrap 95% CIs (rliable's,
     Agarwal et al. 2021): for the final and the area-under-curve return, and the return at each of
-    `reading_steps` and `at_steps`, the difference of the cells' means over seeds and the
-    probability that a run of a beats a run of b. `run_dir` may be directories of one experiment
-    pooled by `pool_runs` (seeds 0-4 and 5-9 read as 10 seeds). Rows: pair, metric and the keys
-    of `bootstrap_difference`; ValueError when an evaluation of `at_steps` is missing."""
+    `reading_steps`, the difference of the cells' means over seeds and the probability that a run
+    of a beats a run of b. Rows: pair, metric and the keys of `bootstrap_difference`."""
     run = as_run(run_dir)
     eval_return = np.asarray(run.metrics["eval_return"], dtype=np.float64)
     steps = [int(s) for s in env_steps_axis(run)]
-    read_at = sorted(set(reading_steps(run)) | set(at_steps))
-    values = {f"return at {at:,}": eval_return[:, evaluation_index(steps, at)] for at in read_at}
+    values = {f"return at {at:,}": eval_return[:, steps.index(at)] for at in reading_steps(run)}
     values |= {
         "final return": eval_return[:, -1],
         "AUC": area_under_curve(eval_return, env_steps_axis(run)),

@@ -51,10 +51,10 @@ COMMANDS: dict[str, str] = {
     "seed_sweep": "train a sweep of runs (cells x seeds) in one compiled program",
     "train_expert": "train plain SAC over seeds and save the best actor as the expert",
     "demonstrate": human_cli.SUMMARY,
-    "plot": "(re)draw the figures and summary of a run directory",
-    "compare": "two run directories, cell by cell, or one directory's pairs of strategies "
-    "(AQSAC - BQSAC, ...) over seeds pooled from several: a - b of the mean return and P(a > b) "
-    "with 95% stratified-bootstrap CIs (rliable)",
+    "plot": "(re)draw the figures and summary of a run directory, or of several pooled (seeds "
+    "run in two goes)",
+    "compare": "two run directories, cell by cell: a - b of the mean return and P(a > b) with "
+    "95% stratified-bootstrap CIs (rliable)",
     "export_expert": "save the best run's actor from the latest checkpoint of a plain-SAC run "
     "as the expert",
     "evaluate_expert": "roll out a saved expert deterministically on fresh episodes: return "
@@ -114,18 +114,20 @@ def build_parser() -> argparse.ArgumentParser:
         _add_training_arguments(p, name)
     human_cli.add_arguments(commands["demonstrate"])  # main hands `demonstrate` to human_cli
     commands["plot"].add_argument(
-        "run_dir", help="a run directory, or a group's (one program per agent family)"
+        "run_dir",
+        help="a run directory, or a group's (one program per agent family), or several run "
+        "directories of one experiment with different seeds, comma-separated, pooled into --out",
+    )
+    commands["plot"].add_argument(
+        "--out", default=None, help="where several comma-separated directories are pooled"
     )
     comp = commands["compare"]
-    pooled = "a run directory, or several runs with different seeds, comma-separated (pooled)"
-    comp.add_argument("run_dir_a", metavar="RUN_DIR_A", help=pooled)
-    comp.add_argument(
-        "run_dir_b",
-        metavar="RUN_DIR_B",
-        nargs="?",
-        default=None,
-        help=pooled + "; without it, RUN_DIR_A's own pairs (as in its comparison.md)",
-    )
+    for side in ("a", "b"):
+        comp.add_argument(
+            f"run_dir_{side}",
+            metavar=f"RUN_DIR_{side.upper()}",
+            help="a run directory, or several runs with different seeds, comma-separated (pooled)",
+        )
     comp.add_argument(
         "--at", default="", metavar="STEPS", help="also compare at these env steps (comma list)"
     )
@@ -199,9 +201,7 @@ def run_dir_list(arg: str) -> list[Path]:
 
 
 def compare_command(args: argparse.Namespace) -> None:
-    """`compare A [B] [--at STEPS] [--out FILE]`: print (and write) `compare.compare_runs` of A
-    against B, or without B `compare.compare`, A's own pairs of strategies; either side may be
-    comma-joined directories of one experiment, pooled (`rundir.pool_runs`)."""
+    """`compare A B [--at STEPS] [--out FILE]`: print (and write) `compare.compare_runs`."""
     from arld_jax import (  # here, not at the top: scipy, which no other command needs
         compare,
         rundir,
@@ -212,41 +212,45 @@ def compare_command(args: argparse.Namespace) -> None:
     except ValueError:
         msg = f"error: --at {args.at!r}: a comma list of env steps, e.g. 100000,200000"
         raise SystemExit(msg) from None
-    given = [x for x in (args.run_dir_a, args.run_dir_b) if x is not None]
-    sides = [run_dir_list(x) for x in given]
-    for d in (d for dirs in sides for d in dirs):
+    sides = [run_dir_list(args.run_dir_a), run_dir_list(args.run_dir_b)]
+    for d in sides[0] + sides[1]:
         require_run_dir(d)
     try:
-        runs = [rundir.pool_runs(dirs) for dirs in sides]
-        if len(runs) == 2:
-            title, final_note = f"{args.run_dir_a} against {args.run_dir_b}", ""
-            rows = compare.compare_runs(runs[0], runs[1], at)
-        else:
-            (run,) = runs
-            if run.periods == 0:
-                raise ValueError(f"{run.where} has no evaluation yet")
-            title = f"Pairwise comparison: {run.name}, seeds {run.config.get('seeds')}"
-            final_note = (
-                f" Final return: at {int(rundir.env_steps_axis(run)[-1]):,} env steps, the last "
-                "evaluation present in every directory."
-            )
-            rows = compare.compare(run, at_steps=at)
-            if not rows:
-                raise ValueError(f"{run.where} has no pair of strategies to compare")
+        a, b = (rundir.pool_runs(dirs) for dirs in sides)
+        rows = compare.compare_runs(a, b, at)
     except ValueError as err:
         raise SystemExit(f"error: {err}") from None
     text = (
-        f"# {title}\n\n"
-        f"Command: `{PROG} compare {' '.join(given)}"
+        f"# {args.run_dir_a} against {args.run_dir_b}\n\n"
+        f"Command: `{PROG} compare {args.run_dir_a} {args.run_dir_b}"
         + (f" --at {args.at}" if args.at else "")
         + "`. a − b of the mean return over seeds and the probability that a run of a scores "
-        f"higher than a run of b, {compare.INTERVALS}{final_note}\n\n"
-        + compare.format_comparison(rows)
-        + "\n"
+        f"higher than a run of b, {compare.INTERVALS}\n\n" + compare.format_comparison(rows) + "\n"
     )
     print(text, end="")
     if args.out:
         Path(args.out).write_text(text)
+
+
+def pool_command(args: argparse.Namespace, argv: list[str]) -> None:
+    """`plot A1,A2 --out DIR`: A1 and A2 (one experiment, different seeds) pooled into the run
+    directory DIR, then summarised, compared and drawn there like any run."""
+    from arld_jax import rundir
+
+    sources = run_dir_list(args.run_dir)
+    if args.out is None or len(sources) < 2:
+        raise SystemExit(
+            "error: plot pools run directories given as A1,A2 (comma-separated, at least two) "
+            "into --out DIR; give both, or one run directory and no --out"
+        )
+    for d in sources:
+        require_run_dir(d)
+    out = Path(args.out)
+    try:
+        rundir.write_pooled(sources, out, command=f"{PROG} {' '.join(argv)}")
+    except ValueError as err:
+        raise SystemExit(f"error: {err}") from None
+    driver.write_results(out, True, print)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -287,6 +291,9 @@ def main(argv: list[str] | None = None) -> None:
         compare_command(args)
         return
     if args.command == "plot":
+        if args.out is not None or len(run_dir_list(args.run_dir)) > 1:
+            pool_command(args, argv)
+            return
         run_dir = Path(args.run_dir)
         if (run_dir / GROUP_FILE).exists():
             driver.write_group_results(run_dir, True, print)

@@ -162,9 +162,14 @@ def check_layout(out: Path, layout: dict[str, Any], done: int) -> None:
             raise SystemExit(layout_error(out, done, f"saved {saved}, now {layout}"))
 
 
+STATE_SAMPLES: tuple[str, ...] = ("visited", "queried")
+"""The state samples of metrics.npz (`<name>_obs`, `_env_step`, `_valid`: [runs, K, ...], drawn
+over the whole run, no period axis)."""
+
+
 def state_samples(state, num_runs: int) -> dict[str, np.ndarray]:  # noqa: ANN001
     out = {}
-    for name in ("visited", "queried"):
+    for name in STATE_SAMPLES:
         s = getattr(state, name)
         out[f"{name}_obs"] = np.asarray(s.obs)[:num_runs]
         out[f"{name}_env_step"] = np.asarray(s.env_step)[:num_runs]
@@ -292,8 +297,7 @@ keeps the evaluations all of them have)."""
 def pool_runs(run_dirs: Sequence[str | Path | RunDir]) -> RunDir:
     """Run directories of one experiment run with different seeds (seeds 0-4, later 5-9 with the
     same command and another --out), read as one: their runs side by side, in the order given,
-    over the evaluations all of them have. Only ``eval_return`` and ``env_steps`` are pooled (what
-    `compare_runs` reads); one directory is returned as loaded.
+    over the evaluations all of them have (`pool_metrics`); one directory is returned as loaded.
 
     Raises ValueError naming the directories and the difference when their configs differ in a
     field other than `POOL_MAY_DIFFER`, when their sweeps or experts differ, or when a cell has the
@@ -335,15 +339,13 @@ def pool_runs(run_dirs: Sequence[str | Path | RunDir]) -> RunDir:
                 )
             seen[key] = run.path
     periods = min(run.periods for run in runs)
-    eval_return = np.concatenate([r.metrics["eval_return"][:, :periods] for r in runs])
-    steps = env_steps_axis(first)[:periods]
     entries = [dict(e, run=i) for i, e in enumerate(e for r in runs for e in r.runs)]
     seeds = [s for r in runs for s in r.config.get("seeds", [])]
     return RunDir(
         path=first.path,
         config=dict(first.config, seeds=seeds),
         runs=entries,
-        metrics=dict(eval_return=eval_return, env_steps=np.tile(steps, (len(eval_return), 1))),
+        metrics=pool_metrics(runs, periods),
         timing={},
         periods=periods,
         expected_periods=max(r.expected_periods for r in runs),
@@ -351,6 +353,50 @@ def pool_runs(run_dirs: Sequence[str | Path | RunDir]) -> RunDir:
         missing_runs=sum(r.missing_runs for r in runs),
         sources=tuple(r.path for r in runs),
     )
+
+
+def pool_metrics(runs: Sequence[RunDir], periods: int) -> dict[str, np.ndarray]:
+    """The metrics every one of `runs` has, their runs side by side: period metrics over the first
+    `periods` evaluations; the state samples (`STATE_SAMPLES`, drawn over a whole run) only when
+    every run has exactly `periods` evaluations, since a longer run's would cover later states."""
+    samples = tuple(f"{name}_" for name in STATE_SAMPLES)
+    same_length = all(r.periods == periods for r in runs)
+    out = {}
+    for key in sorted(set.intersection(*(set(r.metrics) for r in runs))):
+        arrays = [np.asarray(r.metrics[key]) for r in runs]
+        if key.startswith(samples):
+            if same_length:
+                out[key] = np.concatenate(arrays)
+        elif all(a.ndim >= 2 for a in arrays):
+            out[key] = np.concatenate([a[:, :periods] for a in arrays])
+    if "env_steps" not in out:  # directories written before env_steps was recorded
+        steps = env_steps_axis(runs[0])[:periods]
+        out["env_steps"] = np.tile(steps, (len(out["eval_return"]), 1))
+    return out
+
+
+def write_pooled(run_dirs: Sequence[str | Path], out: Path, command: str) -> RunDir:
+    """Write `pool_runs(run_dirs)` as a run directory `out` (config.json, runs.json, metrics.npz),
+    which `plot` then summarises, compares and draws like any other: seeds 0-4 and 5-9 run in two
+    goes, read as one experiment of 10 seeds. config.json records `command` and the directories
+    pooled. Raises ValueError (nothing written) when `out` holds a run directory that is not such
+    a pool, or is one of `run_dirs`."""
+    sources = [Path(d) for d in run_dirs]
+    if any(out.resolve() == d.resolve() for d in sources):
+        raise ValueError(f"--out {out} is one of the directories pooled; choose another")
+    if (out / CONFIG_FILE).exists():
+        if "pooled_from" not in json.loads((out / CONFIG_FILE).read_text()):
+            raise ValueError(
+                f"{out} holds a run directory, not a pool of runs; nothing was overwritten: "
+                "choose another --out"
+            )
+    pooled = pool_runs(sources)
+    out.mkdir(parents=True, exist_ok=True)
+    config = dict(pooled.config, command=command, pooled_from=[str(d) for d in sources])
+    (out / CONFIG_FILE).write_text(json.dumps(config, indent=2) + "\n")
+    (out / RUNS_FILE).write_text(json.dumps(pooled.runs, indent=1) + "\n")
+    save_npz(out / METRICS_FILE, pooled.metrics)
+    return load_run(out)
 
 
 def as_run(run: RunDir | str | Path) -> RunDir:

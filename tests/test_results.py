@@ -615,38 +615,52 @@ def test_compare_command_pools_comma_separated_directories(tmp_path: Path, capsy
         run.main(["compare", f"{a1},{tmp_path}", str(b)])
 
 
-def test_compare_command_with_one_side_reads_its_own_pairs_over_pooled_seeds(
-    tmp_path: Path, capsys
-) -> None:
-    """`compare A1,A2` without B: A's pairs of strategies (as its comparison.md has them) over the
-    seeds of both directories, at the evaluations both have (A2 stops one short) and at --at.
-    eval_return = 100 (cell + 1)(p + 1) + 10 seed: at the 3rd evaluation (p = 2) AQSAC (cell 2)
-    - SAC (cell 0) is 600, over seeds 0-4 pooled from 0-2 and 3-4; at 1,000 (p = 0), 200. A
-    directory without a pair, or an --at with no evaluation, is a clean error."""
+def test_plot_pools_directories_into_one_run_directory_of_every_seed(tmp_path: Path) -> None:
+    """`plot A1,A2 --out P`: seeds 0-2 and 3-4 of one experiment (A2 one evaluation short) written
+    as one run directory of 5 seeds per cell over the 3 evaluations both have, which the summary
+    and the comparison read like any run. eval_return = 100 (cell + 1)(p + 1) + 10 seed: at p = 2
+    cell c's mean is 300 (c + 1) + 20, and AQSAC (cell 2) - SAC (cell 0) is 600 with Welch's
+    interval of the hand-built samples. The state samples, drawn over whole runs, are dropped
+    when the lengths differ. --out on a run directory, or on one of the sources, is refused
+    with nothing written."""
     from arld_jax import run  # the CLI (imports JAX, unlike the rest of this file)
 
     strategies = ["none", "bernoulli", "active"]
     cells, sweep = [{"strategy": s} for s in strategies], {"strategy": strategies}
     a1 = write_run_dir(tmp_path / "a1", cells, sweep)
     a2 = write_run_dir(tmp_path / "a2", cells, sweep, periods=3, seeds=(3, 4))
-    out = tmp_path / "pairs.md"
-    run.main(["compare", f"{a1},{a2}", "--at", "1000", "--out", str(out)])
-    text = capsys.readouterr().out
-    assert text == out.read_text()
-    assert "seeds [0, 1, 2, 3, 4]" in text and "at 3,000 env steps" in text
+    out = tmp_path / "pooled"
+    run.main(["plot", f"{a1},{a2}", "--out", str(out)])
+    pooled = rundir.load_run(out)
+    assert (pooled.periods, pooled.partial, pooled.config["seeds"]) == (3, True, [0, 1, 2, 3, 4])
+    assert pooled.config["pooled_from"] == [str(a1), str(a2)]
+    assert "visited_obs" not in pooled.metrics and pooled.metrics["demos_used"].shape == (15, 3)
+    rows = summary.summarize(pooled)
+    assert [r["n_seeds"] for r in rows] == [5, 5, 5]
+    assert [r["final_return_mean"] for r in rows] == pytest.approx([320, 620, 920])
+    final = next(
+        r
+        for r in compare.compare(pooled)
+        if r["pair"] == "AQSAC - SAC" and r["metric"] == "final return"
+    )
     seeds = np.arange(5.0)
-    x, y = 100 * 3 * 3 + 10 * seeds, 100 * 1 * 3 + 10 * seeds
-    lo, hi = stats.welch_ci95(x, y)
-    final = next(line for line in text.splitlines() if "| AQSAC - SAC | final return" in line)
-    assert final.startswith("| AQSAC - SAC | final return | 5 / 5 | 600 [")
-    assert f"| [{lo:,.0f}, {hi:,.0f}] |" in final
-    assert "| AQSAC - SAC | return at 1,000 | 5 / 5 | 200 [" in text
-    assert "| AQSAC - BQSAC | final return | 5 / 5 | 300 [" in text
-    with pytest.raises(SystemExit, match="no evaluation at 4,000 env steps"):
-        run.main(["compare", f"{a1},{a2}", "--at", "4000"])
-    plain = write_run_dir(tmp_path / "plain", NONE_AND_BERNOULLI[:1], {})
-    with pytest.raises(SystemExit, match="no pair of strategies"):
-        run.main(["compare", str(plain)])
+    assert final["diff"] == pytest.approx(600)
+    assert (final["welch_lo"], final["welch_hi"]) == pytest.approx(
+        stats.welch_ci95(900 + 10 * seeds, 300 + 10 * seeds)
+    )
+    for name in ("summary.md", "comparison.md", "figures/fig4_5_returns.png"):
+        assert (out / name).is_file(), name
+    assert f"plot {a1},{a2} --out {out}" in (out / "summary.md").read_text()
+    before = (a1 / "config.json").read_text()
+    with pytest.raises(SystemExit, match="one of the directories pooled"):
+        run.main(["plot", f"{a1},{a2}", "--out", str(a1)])
+    other = write_run_dir(tmp_path / "other", cells, sweep, seeds=(7,))
+    with pytest.raises(SystemExit, match="holds a run directory, not a pool"):
+        run.main(["plot", f"{a1},{a2}", "--out", str(other)])
+    assert (a1 / "config.json").read_text() == before
+    assert rundir.load_run(other).config["seeds"] == [7]
+    with pytest.raises(SystemExit, match="comma-separated, at least two"):
+        run.main(["plot", str(a1), "--out", str(out)])
 
 
 def test_comparison_pairs_include_active_against_greedy(tmp_path: Path) -> None:
