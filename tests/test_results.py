@@ -635,6 +635,9 @@ def test_plot_pools_directories_into_one_run_directory_of_every_seed(tmp_path: P
     assert (pooled.periods, pooled.partial, pooled.config["seeds"]) == (3, True, [0, 1, 2, 3, 4])
     assert pooled.config["pooled_from"] == [str(a1), str(a2)]
     assert "visited_obs" not in pooled.metrics and pooled.metrics["demos_used"].shape == (15, 3)
+    as_long = write_run_dir(tmp_path / "a3", cells, sweep, seeds=(5, 6))
+    kept = rundir.pool_runs([a1, as_long]).metrics  # equally long: the state samples stay
+    assert kept["visited_obs"].shape[0] == kept["eval_return"].shape[0] == 15
     rows = summary.summarize(pooled)
     assert [r["n_seeds"] for r in rows] == [5, 5, 5]
     assert [r["final_return_mean"] for r in rows] == pytest.approx([320, 620, 920])
