@@ -52,6 +52,7 @@ STAT_COLUMNS: tuple[str, ...] = (
     "episode_length_late_mean",
     "episode_length_late_ci95",
     "expert_return",
+    "above_expert",
     "env_steps_per_second",
     "periods",
     "env_steps",
@@ -144,7 +145,9 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
     n_seeds; final_return_mean/ci95 (eval return at the last evaluation present);
     final_return_iqm/_lo/_hi (its interquartile mean and 95% bootstrap interval, `iqm_ci95`); auc_mean/ci95
     (`area_under_curve`); demos_used_mean/ci95 (final cumulative demonstrations); expert_return
-    (config.json, or nan); env_steps_per_second (timing.json, all runs together, or nan); periods
+    (config.json, or nan); above_expert (how many seeds' final return is above the expert's, the
+    paper's "ends above the expert" seed by seed; nan without an expert); env_steps_per_second
+    (timing.json, all runs together, or nan); periods
     (evaluation periods present) and env_steps (env steps at the last evaluation present).
     Means and 95% CIs are over the seeds of the cell (`mean_ci95`).
     """
@@ -188,6 +191,7 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
         row["fell_late_mean"], row["fell_late_ci95"] = mean_ci95(fell[idx])
         row["episode_length_late_mean"], row["episode_length_late_ci95"] = mean_ci95(lengths[idx])
         row["expert_return"] = expert
+        row["above_expert"] = int(np.sum(final > expert)) if math.isfinite(expert) else math.nan
         row["env_steps_per_second"] = sps
         row["periods"] = int(periods)
         row["env_steps"] = int(steps[-1]) if periods else 0
@@ -280,6 +284,11 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
         "middle 3) [95% percentile-bootstrap interval]. AUC: mean evaluation return over all evaluation points present. "
         "Demos: cumulative demonstrated env steps at the end."
         + (
+            " Seeds above the expert: runs whose final return is above the expert's."
+            if math.isfinite(expert)
+            else ""
+        )
+        + (
             " Upside down: % of the visited training states with the torso upside down "
             "(|pitch| > 90°) in the last 30% of the periods present (the flipped gait)."
             if flips
@@ -311,6 +320,7 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
         "final IQM",
         "AUC (mean return)",
         "demos used",
+        *(["seeds above the expert"] if math.isfinite(expert) else []),
         *(["upside down (last 30%)"] if flips else []),
         *(["fell (last 30%)", "episode length (last 30%)"] if falls else []),
     ]
@@ -327,6 +337,8 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
             format_mean_ci(row["auc_mean"], row["auc_ci95"]),
             format_mean_ci(row["demos_used_mean"], row["demos_used_ci95"]),
         ]
+        if math.isfinite(expert):
+            values.append(f"{row['above_expert']} of {row['n_seeds']}")
         if flips:
             values.append(
                 _format_percent(row["upside_down_late_mean"], row["upside_down_late_ci95"])

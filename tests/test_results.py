@@ -220,6 +220,7 @@ def test_summarize_hand_computed(run_dir: Path) -> None:
     assert bq["demos_used_mean"] == pytest.approx(93.3333, abs=1e-3)
     assert bq["demos_used_ci95"] == pytest.approx(28.684, abs=1e-3)
     assert bq["expert_return"] == 3000.0
+    assert sac["above_expert"] == bq["above_expert"] == 0  # finals 400-820, expert 3,000
     assert bq["env_steps_per_second"] == 1500.0
     assert bq["periods"] == 4 and bq["env_steps"] == 4000
 
@@ -253,6 +254,7 @@ def test_write_summary_csv_schema_and_markdown(run_dir: Path) -> None:
         "episode_length_late_mean",
         "episode_length_late_ci95",
         "expert_return",
+        "above_expert",
         "env_steps_per_second",
         "periods",
         "env_steps",
@@ -265,12 +267,29 @@ def test_write_summary_csv_schema_and_markdown(run_dir: Path) -> None:
     assert "| 410 ± 25 | 410 [" in md
     assert "| 810 ± 25 |" in md
     assert "| 93 ± 29 |" in md
-    assert "| 0 ± 0 |" in md
+    assert "| 0 ± 0 | 0 of 3 |" in md  # SAC's demos, then its seeds above the expert
     assert "95% confidence interval" in md and "Student's t" in md
     assert "Env steps per run: 4,000" in md and "[0, 1, 2]" in md
     assert "Partial" not in md
     # one header row, one separator, one row per cell
     assert sum(line.startswith("|") for line in md.splitlines()) == 4
+
+
+def test_seeds_above_the_expert_counted_per_cell(tmp_path: Path) -> None:
+    # finals 400 (c + 1) + 10 s: SAC [400, 410, 420], BQSAC [800, 810, 820]; with the expert at
+    # 805, no SAC seed and two BQSAC seeds end above it (equal is not above: 410 with 410)
+    run_dir = write_run_dir(
+        tmp_path / "e", NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]}, expert=805.0
+    )
+    sac, bq = summary.summarize(run_dir)
+    assert (sac["above_expert"], bq["above_expert"]) == (0, 2)
+    tie = write_run_dir(
+        tmp_path / "t", NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]}, expert=410.0
+    )
+    assert [r["above_expert"] for r in summary.summarize(tie)] == [1, 3]
+    _, md_path = summary.write_summary(run_dir)
+    md = md_path.read_text()
+    assert "seeds above the expert" in md and "| 2 of 3 |" in md and "| 0 of 3 |" in md
 
 
 def test_partial_run_is_summarised_over_periods_present(tmp_path: Path) -> None:
@@ -294,7 +313,7 @@ def test_partial_run_is_summarised_over_periods_present(tmp_path: Path) -> None:
     assert bq["demos_used_mean"] == pytest.approx(60.0)
     assert bq["demos_used_ci95"] == pytest.approx(49.683, abs=1e-3)
     assert bq["periods"] == 2 and bq["env_steps"] == 2000
-    assert math.isnan(bq["expert_return"])
+    assert math.isnan(bq["expert_return"]) and math.isnan(bq["above_expert"])
     _, md_path = summary.write_summary(run_dir)
     md = md_path.read_text()
     assert "Partial run directory" in md and "2 of 4 evaluation periods" in md
