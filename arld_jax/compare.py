@@ -24,6 +24,7 @@ from arld_jax.rundir import (
     RunDir,
     as_run,
     env_steps_axis,
+    evaluation_index,
     expert_return,
     group_cells,
     run_field,
@@ -82,19 +83,6 @@ def reading_steps(run: RunDir) -> list[int]:
     total = int(run.cfg.get("total_env_steps") or 0)
     steps = [int(s) for s in env_steps_axis(run)]
     return [at for at in (total // 4, total // 2) if at in steps[:-1]]
-
-
-def evaluation_index(steps: Sequence[int], at: int) -> int:
-    """The index of the evaluation at `at` env steps among `steps`; ValueError naming the
-    evaluations there are when there is none at `at`."""
-    hits = np.flatnonzero(np.asarray(steps) == at)
-    if len(hits) == 0:
-        raise ValueError(
-            f"no evaluation at {at:,} env steps: there are evaluations at "
-            f"{int(steps[0]):,}, {int(steps[1] if len(steps) > 1 else steps[0]):,}, ..., "
-            f"{int(steps[-1]):,}"
-        )
-    return int(hits[0])
 
 
 def compare(run_dir: str | Path | RunDir, reps: int = BOOTSTRAP_REPS, seed: int = 0) -> list[dict]:
@@ -217,8 +205,15 @@ def write_comparison(run_dir: str | Path | RunDir) -> Path | None:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
+    path = run.path / COMPARISON_MD
+    path.write_text(comparison_markdown(run, rows))
+    return path
+
+
+def comparison_markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
+    """comparison.md's text: what the numbers are, at which env steps, then `rows` as a table."""
     lines = [
-        f"# Pairwise comparison: {run.path.name}",
+        f"# Pairwise comparison: {run.name}",
         "",
         "a − b: the difference of the cells' mean returns over seeds, and the probability that a "
         f"run of a scores higher than a run of b (Agarwal et al. 2021), {INTERVALS} "
@@ -231,9 +226,7 @@ def write_comparison(run_dir: str | Path | RunDir) -> Path | None:
         "",
         format_comparison(rows),
     ]
-    path = run.path / COMPARISON_MD
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return "\n".join(lines) + "\n"
 
 
 def _interval(row: dict[str, Any]) -> tuple[float, float]:

@@ -53,6 +53,8 @@ COMMANDS: dict[str, str] = {
     "demonstrate": human_cli.SUMMARY,
     "plot": "(re)draw the figures and summary of a run directory, or of several pooled (seeds "
     "run in two goes)",
+    "summary": "print the summary table and the pairwise comparisons of a run directory, at "
+    "its last evaluation or as if it had stopped at earlier ones (--at 100000,200000)",
     "compare": "two run directories, cell by cell: a - b of the mean return and P(a > b) with "
     "95% stratified-bootstrap CIs (rliable)",
     "export_expert": "save the best run's actor from the latest checkpoint of a plain-SAC run "
@@ -121,6 +123,18 @@ def build_parser() -> argparse.ArgumentParser:
     commands["plot"].add_argument(
         "--out", default=None, help="where several comma-separated directories are pooled"
     )
+    summ = commands["summary"]
+    summ.add_argument(
+        "run_dir",
+        help="a run directory, or several runs with different seeds, comma-separated (pooled)",
+    )
+    summ.add_argument(
+        "--at",
+        default="",
+        metavar="STEPS",
+        help="read at these env steps (comma list) instead of the last evaluation",
+    )
+    summ.add_argument("--out", default=None, help="also write the tables to this markdown file")
     comp = commands["compare"]
     for side in ("a", "b"):
         comp.add_argument(
@@ -200,6 +214,42 @@ def run_dir_list(arg: str) -> list[Path]:
     return [Path(part) for part in arg.split(",") if part.strip()]
 
 
+def steps_list(text: str) -> list[int]:
+    """An `--at` option: env steps, comma-separated; exits with a clear error otherwise."""
+    try:
+        return [int(x.replace("_", "")) for x in text.split(",") if x.strip()]
+    except ValueError:
+        msg = f"error: --at {text!r}: a comma list of env steps, e.g. 100000,200000"
+        raise SystemExit(msg) from None
+
+
+def summary_command(args: argparse.Namespace) -> None:
+    """`summary RUN_DIR [--at STEPS] [--out FILE]`: print (and write) the summary table and the
+    pairwise comparisons, read at the last evaluation or at each of STEPS (`rundir.read_at`)."""
+    from arld_jax import compare, rundir, summary
+
+    at = steps_list(args.at)
+    dirs = run_dir_list(args.run_dir)
+    for d in dirs:
+        require_run_dir(d)
+    try:
+        run = rundir.pool_runs(dirs)
+        readings = [(s, rundir.read_at(run, s)) for s in at] or [(None, run)]
+    except ValueError as err:
+        raise SystemExit(f"error: {err}") from None
+    command = f"{PROG} summary {args.run_dir}" + (f" --at {args.at}" if args.at else "")
+    parts = []
+    for steps, reading in readings:
+        title = f"# {run.name}" + (f", read at {steps:,} env steps" if steps else "")
+        parts += [title, "", f"Printed by `{command}`.", "", summary.summary_markdown(reading)]
+        if compare.comparison_pairs(reading) and reading.periods:
+            parts += [compare.comparison_markdown(reading, compare.compare(reading))]
+    text = "\n".join(parts)
+    print(text, end="")
+    if args.out:
+        Path(args.out).write_text(text)
+
+
 def compare_command(args: argparse.Namespace) -> None:
     """`compare A B [--at STEPS] [--out FILE]`: print (and write) `compare.compare_runs`."""
     from arld_jax import (  # here, not at the top: scipy, which no other command needs
@@ -207,11 +257,7 @@ def compare_command(args: argparse.Namespace) -> None:
         rundir,
     )
 
-    try:
-        at = [int(x.replace("_", "")) for x in args.at.split(",") if x.strip()]
-    except ValueError:
-        msg = f"error: --at {args.at!r}: a comma list of env steps, e.g. 100000,200000"
-        raise SystemExit(msg) from None
+    at = steps_list(args.at)
     sides = [run_dir_list(args.run_dir_a), run_dir_list(args.run_dir_b)]
     for d in sides[0] + sides[1]:
         require_run_dir(d)
@@ -289,6 +335,9 @@ def main(argv: list[str] | None = None) -> None:
         return
     if args.command == "compare":
         compare_command(args)
+        return
+    if args.command == "summary":
+        summary_command(args)
         return
     if args.command == "plot":
         if args.out is not None or len(run_dir_list(args.run_dir)) > 1:

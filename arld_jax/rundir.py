@@ -427,6 +427,38 @@ def env_steps_axis(run: RunDir) -> np.ndarray:
     return (np.arange(run.periods) + 1) * eval_every
 
 
+def evaluation_index(steps: Sequence[int], at: int) -> int:
+    """The index of the evaluation at `at` env steps among `steps`; ValueError naming the
+    evaluations there are when there is none at `at`."""
+    hits = np.flatnonzero(np.asarray(steps) == at)
+    if len(hits) == 0:
+        raise ValueError(
+            f"no evaluation at {at:,} env steps: there are evaluations at "
+            f"{int(steps[0]):,}, {int(steps[1] if len(steps) > 1 else steps[0]):,}, ..., "
+            f"{int(steps[-1]):,}"
+        )
+    return int(hits[0])
+
+
+def read_at(run: RunDir, at: int) -> RunDir:
+    """`run` as if it had stopped at its evaluation at `at` env steps: the period metrics up to
+    that evaluation, so that its summary and comparisons read the return at `at` as the final
+    return and the AUC up to `at` (the 100k and 200k readings of a 400k run). The state samples,
+    drawn over the whole run, are dropped unless `at` is its last evaluation. ValueError naming
+    the evaluations there are when there is none at `at`."""
+    periods = evaluation_index(env_steps_axis(run), at) + 1
+    if periods == run.periods:
+        return run
+    return dataclasses.replace(
+        run,
+        metrics=pool_metrics([run], periods),
+        timing={},
+        periods=periods,
+        expected_periods=periods,
+        partial=False,
+    )
+
+
 def group_cells(run: RunDir) -> list[Cell]:
     """The cells of a run directory in cell order; runs of one cell differ only in seed."""
     cells: dict[Any, Cell] = {}

@@ -251,7 +251,7 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
     seeds = config.get("seeds", [])
     seed_counts = sorted({row["n_seeds"] for row in rows})
     per_cell = "/".join(str(n) for n in seed_counts)
-    lines = [f"# Sweep summary: {run.path.name}", ""]
+    lines = [f"# Sweep summary: {run.name}", ""]
     if run.partial:
         note = (
             f"**Partial run directory**: {run.periods} of {run.expected_periods} evaluation "
@@ -350,6 +350,13 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
             ]
         lines.append("| " + " | ".join(values) + " |")
     return "\n".join(lines) + "\n"
+
+
+def summary_markdown(run_dir: str | Path | RunDir) -> str:
+    """summary.md's text: `summarize`'s rows as a Markdown table under a header saying what they
+    are."""
+    run = as_run(run_dir)
+    return _markdown(run, summarize(run))
 
 
 def write_summary(run_dir: str | Path) -> tuple[Path, Path]:

@@ -59,6 +59,7 @@ def test_top_level_help_lists_every_command_with_its_line(capsys):
         "train_expert",
         "demonstrate",
         "plot",
+        "summary",
         "compare",
         "export_expert",
         "evaluate_expert",

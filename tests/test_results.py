@@ -795,3 +795,51 @@ def test_plain_reading_names_which_cells_differ(tmp_path: Path) -> None:
     m["eval_return"][3:6, -1] = [0.0, 1000.0, 2000.0]  # BQSAC's seeds far apart too
     np.savez(path / "metrics.npz", **m)
     assert "did not beat not asking here" in compare.plain_reading(path)
+
+
+def test_read_at_reads_a_run_as_if_it_had_stopped_there(run_dir: Path) -> None:
+    run = rundir.load_run(run_dir)
+    at2k = rundir.read_at(run, 2000)
+    assert at2k.periods == 2 and not at2k.partial
+    assert list(rundir.env_steps_axis(at2k)) == [1000, 2000]
+    assert "visited_obs" not in at2k.metrics  # drawn over the whole run: not a 2k reading
+    sac, bq = summary.summarize(at2k)
+    # final = evaluation 2: 200 (c + 1) + 10 s; AUC = mean(100, 200) (c + 1) + 10 s
+    assert (sac["final_return_mean"], bq["final_return_mean"]) == pytest.approx((210.0, 410.0))
+    assert (sac["auc_mean"], bq["auc_mean"]) == pytest.approx((160.0, 310.0))
+    # demos at the 2k evaluation: 10 trace points x rate [4, 6, 8] -> [40, 60, 80]
+    assert bq["demos_used_mean"] == pytest.approx(60.0) and bq["env_steps"] == 2000
+    assert rundir.read_at(run, 4000) is run  # the last evaluation: the run as loaded
+    with pytest.raises(ValueError, match=r"no evaluation at 2,500 env steps.*1,000, 2,000"):
+        rundir.read_at(run, 2500)
+
+
+def test_summary_command_prints_each_reading_and_refuses_bad_steps(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from arld_jax import run  # the CLI (imports JAX, unlike the rest of this file)
+
+    cells = [{"strategy": "none"}, {"strategy": "bernoulli"}, {"strategy": "active"}]
+    run_dir = write_run_dir(
+        tmp_path / "sweep", cells, {"strategy": ["none", "bernoulli", "active"]}
+    )
+    out = tmp_path / "r.md"
+    run.main(["summary", str(run_dir), "--at", "2000,3000", "--out", str(out)])
+    text = capsys.readouterr().out
+    assert out.read_text() == text
+    first, second = text.split("# sweep, read at 3,000 env steps")
+    assert "# sweep, read at 2,000 env steps" in first and "--at 2000,3000" in first
+    # SAC's finals [200, 210, 220] and [300, 310, 320]: 210 ± 25 at 2k, 310 ± 25 at 3k
+    assert "| 210 ± 25 |" in first and "| 310 ± 25 |" in second
+    # its comparison, AQSAC - SAC at 2k and 3k
+    assert "At the last evaluation present: 2,000 env steps" in first
+    # (finals 600 + 10 s against 200 + 10 s; AUCs 450 + 10 s against 150 + 10 s)
+    assert "| AQSAC - SAC | final return | 3 / 3 | 400 [" in first
+    assert "| AQSAC - SAC | AUC | 3 / 3 | 300 [" in first
+    assert "| AQSAC - SAC | final return | 3 / 3 | 600 [" in second  # 900 + 10 s against 300 + 10 s
+    assert "Partial" not in text
+    before = sorted(p.name for p in run_dir.iterdir())
+    for bad, why in (("2500", "no evaluation at 2,500"), ("1e5", "a comma list of env steps")):
+        with pytest.raises(SystemExit, match=why):
+            run.main(["summary", str(run_dir), "--at", bad])
+    assert sorted(p.name for p in run_dir.iterdir()) == before  # nothing written or lost
