@@ -27,7 +27,7 @@ from pathlib import Path
 from arld_jax import cli, driver
 from arld_jax.config import BACKENDS
 from arld_jax.human import cli as human_cli
-from arld_jax.rundir import CONFIG_FILE, GROUP_FILE
+from arld_jax.rundir import CONFIG_FILE, GROUP_FILE, WRITTEN_FILES
 from arld_jax.sweep import REPO_ROOT, SHIPPED_EXPERT, SWEEP_PRESETS, Sweep, SweepGroup
 from arld_jax.tasks import REGISTRY as TASKS
 
@@ -206,6 +206,16 @@ def require_run_dir(path: Path) -> None:
         raise SystemExit(f"error: {path} is not a run directory (no {CONFIG_FILE})")
 
 
+def require_free_out(out: str | None) -> None:
+    """Exit with a clear error, before anything is computed, when the --out file of `summary` or
+    `compare` would replace a file a run directory's own writers own (its summary.md, say)."""
+    if out and Path(out).name in WRITTEN_FILES and (Path(out).parent / CONFIG_FILE).exists():
+        raise SystemExit(
+            f"error: --out {out} would replace the run directory's own {Path(out).name}; "
+            "choose another name (e.g. readings.md); nothing was written"
+        )
+
+
 def run_dir_list(arg: str) -> list[Path]:
     """`compare`'s RUN_DIR argument: one directory, or directories joined by commas (a directory
     whose own name holds a comma is taken whole when it exists)."""
@@ -229,6 +239,7 @@ def summary_command(args: argparse.Namespace) -> None:
     from arld_jax import compare, rundir, summary
 
     at = steps_list(args.at)
+    require_free_out(args.out)
     dirs = run_dir_list(args.run_dir)
     for d in dirs:
         require_run_dir(d)
@@ -258,6 +269,7 @@ def compare_command(args: argparse.Namespace) -> None:
     )
 
     at = steps_list(args.at)
+    require_free_out(args.out)
     sides = [run_dir_list(args.run_dir_a), run_dir_list(args.run_dir_b)]
     for d in sides[0] + sides[1]:
         require_run_dir(d)

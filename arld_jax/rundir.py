@@ -43,6 +43,11 @@ COMPARISON_CSV, COMPARISON_MD = "comparison.csv", "comparison.md"
 """The pairwise comparisons of the paper's strategies."""
 FIGURES_DIR = "figures"
 """The paper's figures, redrawn by `python -m arld_jax.run plot DIR`."""
+WRITTEN_FILES: tuple[str, ...] = (
+    METRICS_FILE, LAYOUT_FILE, GROUP_FILE, CONFIG_FILE, RUNS_FILE, TIMING_FILE,
+    SUMMARY_CSV, SUMMARY_MD, COMPARISON_CSV, COMPARISON_MD,
+)  # fmt: skip
+"""The files a run directory's own writers (the sweep, `plot`) own: no --out may replace one."""
 _FIELDS = {f.name: f for f in dataclasses.fields(Config) if f.name != "notes"}
 
 

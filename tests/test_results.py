@@ -838,8 +838,13 @@ def test_summary_command_prints_each_reading_and_refuses_bad_steps(
     assert "| AQSAC - SAC | AUC | 3 / 3 | 300 [" in first
     assert "| AQSAC - SAC | final return | 3 / 3 | 600 [" in second  # 900 + 10 s against 300 + 10 s
     assert "Partial" not in text
-    before = sorted(p.name for p in run_dir.iterdir())
+    summary.write_summary(run_dir)
+    before = {p.name: p.read_bytes() for p in run_dir.iterdir() if p.is_file()}
     for bad, why in (("2500", "no evaluation at 2,500"), ("1e5", "a comma list of env steps")):
         with pytest.raises(SystemExit, match=why):
             run.main(["summary", str(run_dir), "--at", bad])
-    assert sorted(p.name for p in run_dir.iterdir()) == before  # nothing written or lost
+    for command in (["summary", str(run_dir)], ["compare", str(run_dir), str(run_dir)]):
+        with pytest.raises(SystemExit, match="would replace the run directory's own summary.md"):
+            run.main([*command, "--at", "2000", "--out", str(run_dir / "summary.md")])
+    after = {p.name: p.read_bytes() for p in run_dir.iterdir() if p.is_file()}
+    assert after == before  # nothing written, nothing lost
