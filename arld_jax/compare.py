@@ -195,10 +195,15 @@ def format_comparison(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def comparable(run: RunDir) -> bool:
+    """Whether `run` has pairs to compare (`comparison_pairs`) and an evaluation to compare at."""
+    return bool(comparison_pairs(run)) and run.periods > 0
+
+
 def write_comparison(run_dir: str | Path | RunDir) -> Path | None:
     """comparison.md (and .csv) of `compare`, or None when the run has no such pairs."""
     run = as_run(run_dir)
-    if not comparison_pairs(run) or run.periods == 0:
+    if not comparable(run):
         return None
     rows = compare(run)
     with (run.path / COMPARISON_CSV).open("w", newline="") as handle:

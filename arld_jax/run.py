@@ -253,7 +253,7 @@ def summary_command(args: argparse.Namespace) -> None:
     for steps, reading in readings:
         title = f"# {run.name}" + (f", read at {steps:,} env steps" if steps else "")
         parts += [title, "", f"Printed by `{command}`.", "", summary.summary_markdown(reading)]
-        if compare.comparison_pairs(reading) and reading.periods:
+        if compare.comparable(reading):
             parts += [compare.comparison_markdown(reading, compare.compare(reading))]
     text = "\n".join(parts)
     print(text, end="")
