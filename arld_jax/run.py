@@ -278,12 +278,16 @@ def compare_command(args: argparse.Namespace) -> None:
         rows = compare.compare_runs(a, b, at)
     except ValueError as err:
         raise SystemExit(f"error: {err}") from None
+    last = next(r["env_steps"] for r in rows if r["metric"] == "final return")
     text = (
         f"# {args.run_dir_a} against {args.run_dir_b}\n\n"
         f"Command: `{PROG} compare {args.run_dir_a} {args.run_dir_b}"
         + (f" --at {args.at}" if args.at else "")
         + "`. a − b of the mean return over seeds and the probability that a run of a scores "
-        f"higher than a run of b, {compare.INTERVALS}\n\n" + compare.format_comparison(rows) + "\n"
+        f"higher than a run of b, {compare.INTERVALS} Final return and AUC: at and up to "
+        f"{last:,} env steps, the last evaluation both have.\n\n"
+        + compare.format_comparison(rows)
+        + "\n"
     )
     print(text, end="")
     if args.out:

@@ -615,18 +615,21 @@ def test_pooling_refuses_shared_seeds_and_other_configs(tmp_path: Path) -> None:
 
 
 def test_compare_command_pools_comma_separated_directories(tmp_path: Path, capsys) -> None:
-    """`compare A1,A2 B` pools A1 and A2; a pooling error is a clean exit naming the problem."""
+    """`compare A1,A2 B` pools A1 and A2; the text says at which env steps B, longer, is read for
+    the final return; a pooling error is a clean exit naming the problem."""
     from arld_jax import run  # the CLI (imports JAX, unlike the rest of this file)
 
     cells, sweep = NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]}
     a1 = write_run_dir(tmp_path / "a1", cells, sweep)
     a2 = write_run_dir(tmp_path / "a2", cells, sweep, seeds=(3, 4))
-    b = write_run_dir(tmp_path / "b", cells, sweep)
+    b = write_run_dir(tmp_path / "b", cells, sweep, periods=PERIODS + 2, total_periods=PERIODS + 2)
     run.main(["compare", f"{a1},{a2}", str(b), "--out", str(tmp_path / "c.md")])
-    assert (
-        "| a1+a2:strategy=none − b:strategy=none | final return | 5 / 3 |"
-        in capsys.readouterr().out
-    )
+    out = capsys.readouterr().out
+    assert "| a1+a2:strategy=none − b:strategy=none | final return | 5 / 3 |" in out
+    assert f"at and up to {PERIODS * EVAL_EVERY:,} env steps, the last evaluation both have" in out
+    none = [r for r in compare.compare_runs(rundir.pool_runs([a1, a2]), b) if "none" in r["pair"]]
+    final = next(r for r in none if r["metric"] == "final return")
+    assert final["diff"] == pytest.approx(10 * (0 + 1 + 2 + 3 + 4) / 5 - 10 * (0 + 1 + 2) / 3)
     assert "Welch" in (tmp_path / "c.md").read_text()
     with pytest.raises(SystemExit, match="seed 0 of cell"):
         run.main(["compare", f"{a1},{a1}", str(b)])
