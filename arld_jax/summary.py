@@ -47,6 +47,10 @@ STAT_COLUMNS: tuple[str, ...] = (
     "upside_down_late_mean",
     "upside_down_late_ci95",
     "upside_down_source",
+    "asked_upside_down_mean",
+    "asked_upside_down_ci95",
+    "visited_upside_down_while_asking_mean",
+    "visited_upside_down_while_asking_ci95",
     "fell_late_mean",
     "fell_late_ci95",
     "episode_length_late_mean",
@@ -138,6 +142,34 @@ def upside_down_late(run: RunDir) -> tuple[np.ndarray, str]:
     return out, "sample"
 
 
+def _share(flags: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """[R] share of the masked entries of [R, K] `flags` that are true; nan where none is masked."""
+    counts = mask.sum(axis=1)
+    return np.where(counts > 0, (flags & mask).sum(axis=1) / np.maximum(counts, 1), np.nan)
+
+
+def upside_down_when_asked(run: RunDir) -> tuple[np.ndarray, np.ndarray]:
+    """[R] share of the sampled states where a query started that have the torso upside down, and
+    the same share of the sampled visited states over the same env steps (up to the last sampled
+    query): whether a strategy asks in flipped states more often than the run is in them, the
+    question of the paper's Fig. 8 read with the gait rule. Both nan without a gait rule, the state
+    samples (a reading at an earlier step drops them) or a sampled query."""
+    metrics = run.metrics
+    nan = np.full(np.asarray(metrics["eval_return"]).shape[0], np.nan)
+    if not has_gait_rule(run) or "queried_obs" not in metrics:
+        return nan, nan
+    asked_valid = np.asarray(metrics["queried_valid"], bool)
+    asked_steps = np.asarray(metrics["queried_env_step"])
+    last_asked = np.where(asked_valid, asked_steps, -1).max(axis=1, initial=-1)
+    meanwhile = np.asarray(metrics["visited_valid"], bool) & (
+        np.asarray(metrics["visited_env_step"]) <= last_asked[:, None]
+    )
+    flipped = lambda name: gait.upside_down(np.asarray(metrics[name], np.float64))  # noqa: E731
+    asked = _share(flipped("queried_obs"), asked_valid)
+    visited = _share(flipped("visited_obs"), meanwhile)
+    return asked, np.where(np.isnan(asked), np.nan, visited)
+
+
 def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
     """One row per cell, in cell order, over the evaluation periods present.
 
@@ -158,6 +190,7 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
     auc = area_under_curve(eval_return, steps)
     demos = metrics.get("demos_used")
     flipped, flipped_source = upside_down_late(run)
+    asked_flipped, visited_flipped = upside_down_when_asked(run)
     fell, lengths = episodes_late(run)
     expert = expert_return(run)
     sps = float(run.timing.get("env_steps_per_second", math.nan))
@@ -188,6 +221,11 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
         row["demos_used_mean"], row["demos_used_ci95"] = mean_ci95(final_demos)
         row["upside_down_late_mean"], row["upside_down_late_ci95"] = mean_ci95(flipped[idx])
         row["upside_down_source"] = flipped_source
+        row["asked_upside_down_mean"], row["asked_upside_down_ci95"] = mean_ci95(asked_flipped[idx])
+        (
+            row["visited_upside_down_while_asking_mean"],
+            row["visited_upside_down_while_asking_ci95"],
+        ) = mean_ci95(visited_flipped[idx])
         row["fell_late_mean"], row["fell_late_ci95"] = mean_ci95(fell[idx])
         row["episode_length_late_mean"], row["episode_length_late_ci95"] = mean_ci95(lengths[idx])
         row["expert_return"] = expert
@@ -234,6 +272,17 @@ def _format_percent(mean: float, ci: float) -> str:
     return f"{100 * mean:.0f} ± {100 * ci:.0f} %" if math.isfinite(ci) else f"{100 * mean:.0f} %"
 
 
+def _format_asked(row: dict[str, Any]) -> str:
+    """The upside-down share when asked, with the visited one meanwhile: "a ± ci % (v ± ci %)"."""
+    if not math.isfinite(row["asked_upside_down_mean"]):
+        return "n/a"
+    asked = _format_percent(row["asked_upside_down_mean"], row["asked_upside_down_ci95"])
+    meanwhile = _format_percent(
+        row["visited_upside_down_while_asking_mean"], row["visited_upside_down_while_asking_ci95"]
+    )
+    return f"{asked} ({meanwhile})"
+
+
 def _format_field(value: Any) -> str:
     """A swept field's value for the Markdown table."""
     if isinstance(value, float):
@@ -246,6 +295,7 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
     config = run.config
     cfg = config.get("config", {})
     falls, flips = has_falls(run), has_gait_rule(run)
+    asked = any(math.isfinite(row["asked_upside_down_mean"]) for row in rows)
     total = int(cfg.get("total_env_steps") or 0)
     last = rows[0]["env_steps"] if rows else 0
     seeds = config.get("seeds", [])
@@ -295,6 +345,14 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
             else ""
         )
         + (
+            " Upside down when asked: % of the sampled states where a query started with the torso "
+            "upside down, and in brackets the same % of the sampled visited states up to the last "
+            "sampled query (a strategy that asks in flipped states more than the run is in them "
+            "shows a larger first number)."
+            if asked
+            else ""
+        )
+        + (
             " Fell: % of the training episodes finished in the last 30% of the periods that "
             "ended by a fall (the task's termination), and their mean length in env steps."
             if falls
@@ -322,6 +380,7 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
         "demos used",
         *(["seeds above the expert"] if math.isfinite(expert) else []),
         *(["upside down (last 30%)"] if flips else []),
+        *(["upside down when asked (visited meanwhile)"] if asked else []),
         *(["fell (last 30%)", "episode length (last 30%)"] if falls else []),
     ]
     lines.append("| " + " | ".join(columns) + " |")
@@ -343,6 +402,8 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
             values.append(
                 _format_percent(row["upside_down_late_mean"], row["upside_down_late_ci95"])
             )
+        if asked:
+            values.append(_format_asked(row))
         if falls:
             values += [
                 _format_percent(row["fell_late_mean"], row["fell_late_ci95"]),
