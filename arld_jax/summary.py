@@ -51,6 +51,8 @@ STAT_COLUMNS: tuple[str, ...] = (
     "asked_upside_down_ci95",
     "visited_upside_down_while_asking_mean",
     "visited_upside_down_while_asking_ci95",
+    "asked_minus_visited_upside_down_mean",
+    "asked_minus_visited_upside_down_ci95",
     "fell_late_mean",
     "fell_late_ci95",
     "episode_length_late_mean",
@@ -226,6 +228,10 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
             row["visited_upside_down_while_asking_mean"],
             row["visited_upside_down_while_asking_ci95"],
         ) = mean_ci95(visited_flipped[idx])
+        (  # paired over seeds: the same runs ask and visit
+            row["asked_minus_visited_upside_down_mean"],
+            row["asked_minus_visited_upside_down_ci95"],
+        ) = mean_ci95(asked_flipped[idx] - visited_flipped[idx])
         row["fell_late_mean"], row["fell_late_ci95"] = mean_ci95(fell[idx])
         row["episode_length_late_mean"], row["episode_length_late_ci95"] = mean_ci95(lengths[idx])
         row["expert_return"] = expert
@@ -273,14 +279,17 @@ def _format_percent(mean: float, ci: float) -> str:
 
 
 def _format_asked(row: dict[str, Any]) -> str:
-    """The upside-down share when asked, with the visited one meanwhile: "a ± ci % (v ± ci %)"."""
+    """The upside-down share when asked, the visited one meanwhile, and their paired difference in
+    points with its interval: "a % (v %), +d [lo, hi]"."""
     if not math.isfinite(row["asked_upside_down_mean"]):
         return "n/a"
-    asked = _format_percent(row["asked_upside_down_mean"], row["asked_upside_down_ci95"])
-    meanwhile = _format_percent(
-        row["visited_upside_down_while_asking_mean"], row["visited_upside_down_while_asking_ci95"]
-    )
-    return f"{asked} ({meanwhile})"
+    asked, meanwhile = row["asked_upside_down_mean"], row["visited_upside_down_while_asking_mean"]
+    diff = 100 * row["asked_minus_visited_upside_down_mean"]
+    half = 100 * row["asked_minus_visited_upside_down_ci95"]
+    points = lambda x: int(round(x))  # noqa: E731  (no "-0")
+    text = f"{points(100 * asked)} % ({points(100 * meanwhile)} %), {points(diff):+d}"
+    interval = f" [{points(diff - half)}, {points(diff + half)}]" if math.isfinite(half) else ""
+    return text + interval
 
 
 def _format_field(value: Any) -> str:
@@ -346,9 +355,10 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
         )
         + (
             " Upside down when asked: % of the sampled states where a query started with the torso "
-            "upside down, and in brackets the same % of the sampled visited states up to the last "
-            "sampled query (a strategy that asks in flipped states more than the run is in them "
-            "shows a larger first number)."
+            "upside down, in brackets the same % of the sampled visited states up to the last "
+            "sampled query, then their difference in points with its 95% interval over seeds "
+            "(paired: each run's two shares); above 0 when a strategy asks in flipped states more "
+            "than the run is in them."
             if asked
             else ""
         )
@@ -380,7 +390,7 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
         "demos used",
         *(["seeds above the expert"] if math.isfinite(expert) else []),
         *(["upside down (last 30%)"] if flips else []),
-        *(["upside down when asked (visited meanwhile)"] if asked else []),
+        *(["upside down when asked (visited meanwhile), difference"] if asked else []),
         *(["fell (last 30%)", "episode length (last 30%)"] if falls else []),
     ]
     lines.append("| " + " | ".join(columns) + " |")

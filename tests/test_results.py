@@ -253,6 +253,8 @@ def test_write_summary_csv_schema_and_markdown(run_dir: Path) -> None:
         "asked_upside_down_ci95",
         "visited_upside_down_while_asking_mean",
         "visited_upside_down_while_asking_ci95",
+        "asked_minus_visited_upside_down_mean",
+        "asked_minus_visited_upside_down_ci95",
         "fell_late_mean",
         "fell_late_ci95",
         "episode_length_late_mean",
@@ -434,8 +436,9 @@ def test_upside_down_late_from_visited_sample_for_old_halfcheetah_runs(tmp_path:
 
 def test_upside_down_when_asked_against_the_states_visited_meanwhile(tmp_path: Path) -> None:
     """Per run: the share of sampled query states that are flipped, and of the sampled visited
-    states up to the last sampled query; a strategy that asks in flipped states shows the first
-    above the second; runs without a sampled query, toy runs and earlier readings show n/a."""
+    states up to the last sampled query; per cell, their difference paired run by run (here the
+    same in every run, so a zero-width interval, where Welch's over the two shares would be wide);
+    runs without a sampled query, toy runs and earlier readings show n/a."""
     sweep = {"strategy": ["none", "bernoulli"]}
     path = write_run_dir(tmp_path / "h", NONE_AND_BERNOULLI, sweep)
     asked, _ = summary.upside_down_when_asked(rundir.load_run(path))
@@ -445,36 +448,36 @@ def test_upside_down_when_asked_against_the_states_visited_meanwhile(tmp_path: P
     (path / "config.json").write_text(json.dumps(cfg))
     m = dict(np.load(path / "metrics.npz"))
     n, k = m["visited_valid"].shape
-    steps = np.tile(np.arange(k) * 10, (n, 1))  # visited sample i seen at env step 10 i
-    visited = np.zeros((n, k, 17))
-    visited[:, [0, 4], 1] = np.pi  # 2 of the 8 states up to step 70 flipped, none after
-    asked_obs = np.zeros((n, k, 17))
-    asked_obs[:, ::2, 1] = -3.0  # half of the query states flipped
+    querying = n // 2  # runs 0..2 are the 'none' cell (no query), 3..5 the 'bernoulli' cell
     asked_valid = np.zeros((n, k), bool)
-    querying = n // 2  # runs 0..2 are the 'none' cell: no query
-    asked_valid[querying:, : k // 2] = True
-    asked_steps = np.tile(np.arange(k) * 10, (n, 1))  # queries up to env step 10 (k/2 - 1)
+    asked_valid[querying:, : k // 2] = True  # 8 sampled queries, at env steps 0..70
+    visited, asked_obs = np.zeros((n, k, 17)), np.zeros((n, k, 17))
+    for r, (asked_flips, visited_flips) in zip(
+        range(querying, n), [(4, [0, 4]), (3, [0]), (5, [0, 2, 4])], strict=True
+    ):
+        asked_obs[r, :asked_flips, 1] = -3.0  # 4, 3, 5 of the 8 query states flipped
+        visited[r, visited_flips, 1] = np.pi  # 2, 1, 3 of the 8 visited up to step 70; none after
     m.update(
         visited_obs=visited,
-        visited_env_step=steps,
+        visited_env_step=np.tile(np.arange(k) * 10, (n, 1)),
         visited_valid=np.ones((n, k), bool),
         queried_obs=asked_obs,
-        queried_env_step=asked_steps,
+        queried_env_step=np.tile(np.arange(k) * 10, (n, 1)),
         queried_valid=asked_valid,
     )
     np.savez(path / "metrics.npz", **m)
     run = rundir.load_run(path)
     asked, meanwhile = summary.upside_down_when_asked(run)
     assert np.all(np.isnan(asked[:querying])) and np.all(np.isnan(meanwhile[:querying]))
-    np.testing.assert_allclose(asked[querying:], 0.5)
-    span = np.arange(k) <= k // 2 - 1  # visited up to the last query's step
-    np.testing.assert_allclose(meanwhile[querying:], 2 / np.sum(span))  # not 2 / k: the span
+    np.testing.assert_allclose(asked[querying:], [4 / 8, 3 / 8, 5 / 8])
+    np.testing.assert_allclose(meanwhile[querying:], [2 / 8, 1 / 8, 3 / 8])  # not / 16: the span
     rows = summary.summarize(run)
     assert np.isnan(rows[0]["asked_upside_down_mean"])
-    assert rows[1]["asked_upside_down_mean"] == pytest.approx(0.5)
+    assert rows[1]["asked_minus_visited_upside_down_mean"] == pytest.approx(0.25)
+    assert rows[1]["asked_minus_visited_upside_down_ci95"] == pytest.approx(0.0, abs=1e-12)
     text = summary.summary_markdown(run)
-    assert "upside down when asked (visited meanwhile)" in text
-    assert "| 50 ± 0 % (25 ± 0 %) |" in text
+    assert "upside down when asked (visited meanwhile), difference" in text
+    assert "| 50 % (25 %), +25 [25, 25] |" in text
     reading = rundir.read_at(run, 2 * EVAL_EVERY)  # drops the state samples: no column
     assert "when asked" not in summary.summary_markdown(reading)
 
