@@ -280,16 +280,21 @@ def _format_percent(mean: float, ci: float) -> str:
 
 def _format_asked(row: dict[str, Any]) -> str:
     """The upside-down share when asked, the visited one meanwhile, and their paired difference in
-    points with its interval: "a % (v %), +d [lo, hi]"."""
+    points with its interval: "a % (v %), +d [lo, hi]"; "a % (n/a)" where no visited state was
+    sampled before the last query (a short run), no interval with one seed."""
     if not math.isfinite(row["asked_upside_down_mean"]):
         return "n/a"
-    asked, meanwhile = row["asked_upside_down_mean"], row["visited_upside_down_while_asking_mean"]
+    points = lambda x: int(round(x))  # noqa: E731  (no "-0")
+    text = f"{points(100 * row['asked_upside_down_mean'])} %"
+    meanwhile = row["visited_upside_down_while_asking_mean"]
+    if not math.isfinite(meanwhile):
+        return text + " (n/a)"
     diff = 100 * row["asked_minus_visited_upside_down_mean"]
     half = 100 * row["asked_minus_visited_upside_down_ci95"]
-    points = lambda x: int(round(x))  # noqa: E731  (no "-0")
-    text = f"{points(100 * asked)} % ({points(100 * meanwhile)} %), {points(diff):+d}"
-    interval = f" [{points(diff - half)}, {points(diff + half)}]" if math.isfinite(half) else ""
-    return text + interval
+    text += f" ({points(100 * meanwhile)} %), {points(diff):+d}"
+    return text + (
+        f" [{points(diff - half)}, {points(diff + half)}]" if math.isfinite(half) else ""
+    )
 
 
 def _format_field(value: Any) -> str:

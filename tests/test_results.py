@@ -480,6 +480,9 @@ def test_upside_down_when_asked_against_the_states_visited_meanwhile(tmp_path: P
     assert "| 50 % (25 %), +25 [25, 25] |" in text
     reading = rundir.read_at(run, 2 * EVAL_EVERY)  # drops the state samples: no column
     assert "when asked" not in summary.summary_markdown(reading)
+    m["visited_env_step"] = m["visited_env_step"] + 1_000  # no state visited before the queries
+    np.savez(path / "metrics.npz", **m)
+    assert "| 50 % (n/a) |" in summary.summary_markdown(rundir.load_run(path))
 
 
 @settings(max_examples=25, deadline=None)
