@@ -118,6 +118,12 @@ def has_gait_rule(run: RunDir) -> bool:
     return spec is not None and spec.has_gait_rule
 
 
+def _share(flags: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """[R] share of the masked entries of [R, K] `flags` that are true; nan where none is masked."""
+    counts = mask.sum(axis=1)
+    return np.where(counts > 0, (flags & mask).sum(axis=1) / np.maximum(counts, 1), np.nan)
+
+
 def upside_down_late(run: RunDir) -> tuple[np.ndarray, str]:
     """[R] fraction of visited training states upside down in the last 30% of the periods present
     (`gait.LATE_FRACTION`), and where it came from: "periods" (the per-period metric
@@ -139,15 +145,7 @@ def upside_down_late(run: RunDir) -> tuple[np.ndarray, str]:
         metrics["visited_env_step"] > (1.0 - gait.LATE_FRACTION) * last
     )
     flipped = gait.upside_down(np.asarray(metrics["visited_obs"], np.float64))
-    counts = late.sum(axis=1)
-    out = np.where(counts > 0, (flipped & late).sum(axis=1) / np.maximum(counts, 1), np.nan)
-    return out, "sample"
-
-
-def _share(flags: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """[R] share of the masked entries of [R, K] `flags` that are true; nan where none is masked."""
-    counts = mask.sum(axis=1)
-    return np.where(counts > 0, (flags & mask).sum(axis=1) / np.maximum(counts, 1), np.nan)
+    return _share(flipped, late), "sample"
 
 
 def upside_down_when_asked(run: RunDir) -> tuple[np.ndarray, np.ndarray]:
