@@ -1,7 +1,7 @@
 """Pairwise comparisons of the paper's strategies across seeds (AQSAC - BQSAC, AQSAC - SAC, ...:
-the differences of final return and AUC with Welch's and the stratified bootstrap's 95% intervals,
-and the probability of improvement), of two run directories cell by cell, and the plain-language
-reading.
+the differences of final, late and AUC return with Welch's and the stratified bootstrap's 95%
+intervals, and the probability of improvement), of two run directories cell by cell, and the
+plain-language reading.
 """
 
 from __future__ import annotations
@@ -78,26 +78,47 @@ def comparison_pairs(run: RunDir) -> list[tuple[str, Cell, Cell]]:
 
 def reading_steps(run: RunDir) -> list[int]:
     """The env steps at which `compare` also reads every pair, besides the last evaluation: a
-    quarter and half of the run's length (100k and 200k of a 400k run), where evaluated and
-    present, so that a reader sees whether the ranking changes with the length of the run."""
+    quarter, half and three quarters of the run's length (100k, 200k and 300k of a 400k run),
+    where evaluated and present, so that a reader sees whether the ranking changes with the length
+    of the run."""
     total = int(run.cfg.get("total_env_steps") or 0)
     steps = [int(s) for s in env_steps_axis(run)]
-    return [at for at in (total // 4, total // 2) if at in steps[:-1]]
+    return [at for at in (total // 4, total // 2, 3 * total // 4) if at in steps[:-1]]
+
+
+LATE_SHARE = 0.1
+"""The late return is each run's mean evaluation return over the last tenth of its evaluations
+present: one evaluation of a few deterministic episodes swings with the policy from one
+evaluation to the next, a mean over the last eight (of a 400k run evaluated every 5k) less so."""
+
+
+def late_evaluations(run: RunDir) -> int:
+    """How many of the last evaluations the late return averages (`LATE_SHARE` of those present,
+    rounded); 0 where that is fewer than two, and the late return would be the final return."""
+    k = round(LATE_SHARE * len(env_steps_axis(run)))
+    return k if k >= 2 else 0
+
+
+def late_return_label(run: RunDir) -> str:
+    """The late return's metric name, with the env steps of its first and last evaluation."""
+    steps = env_steps_axis(run)
+    k = late_evaluations(run)
+    return f"late return ({int(steps[-k]):,} to {int(steps[-1]):,})"
 
 
 def compare(run_dir: str | Path | RunDir, reps: int = BOOTSTRAP_REPS, seed: int = 0) -> list[dict]:
     """Pairwise differences of `comparison_pairs` with stratified-bootstrap 95% CIs (rliable's,
-    Agarwal et al. 2021): for the final and the area-under-curve return, and the return at each of
-    `reading_steps`, the difference of the cells' means over seeds and the probability that a run
+    Agarwal et al. 2021): for the final, the late (`late_evaluations`) and the area-under-curve
+    return, and the return at each of `reading_steps`, the difference of the cells' means over seeds and the probability that a run
     of a beats a run of b. Rows: pair, metric and the keys of `bootstrap_difference`."""
     run = as_run(run_dir)
     eval_return = np.asarray(run.metrics["eval_return"], dtype=np.float64)
     steps = [int(s) for s in env_steps_axis(run)]
     values = {f"return at {at:,}": eval_return[:, steps.index(at)] for at in reading_steps(run)}
-    values |= {
-        "final return": eval_return[:, -1],
-        "AUC": area_under_curve(eval_return, env_steps_axis(run)),
-    }
+    values["final return"] = eval_return[:, -1]
+    if k := late_evaluations(run):
+        values[late_return_label(run)] = eval_return[:, -k:].mean(axis=1)
+    values["AUC"] = area_under_curve(eval_return, env_steps_axis(run))
 
     rows = []
     for name, a, b in comparison_pairs(run):
@@ -227,6 +248,13 @@ def comparison_markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
         "env steps"
         + "".join(f"; also at {at:,}" for at in reading_steps(run))
         + "."
+        + (
+            f" Late return: each run's mean return over its last {late_evaluations(run)} "
+            "evaluations (the last tenth of those present), less swayed than the final return by "
+            "the policy's swings from one evaluation to the next."
+            if late_evaluations(run)
+            else ""
+        )
         + (" **Partial run directory.**" if run.partial else ""),
         "",
         format_comparison(rows),

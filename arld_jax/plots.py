@@ -554,8 +554,8 @@ def fig_pairs(run: Run) -> Figure | None:
     """The paper's comparisons along the run: for each pair of `compare.comparison_pairs`
     (AQSAC - BQSAC, ..., intrinsic - extrinsic), the difference of the cells' mean evaluation
     returns over seeds at every evaluation, with Welch's 95% interval as its band (the reading
-    rule of `comparison.md`), and dotted lines where `comparison.md` also reads the pairs (a quarter
-    and half of the run). So a reader sees whether, and when, a ranking changes with the length of
+    rule of `comparison.md`), and dotted lines where `comparison.md` also reads the pairs (a quarter,
+    half and three quarters of the run). So a reader sees whether, and when, a ranking changes with the length of
     the run. One panel per uncertainty measure for the pairs with an active cell, one for
     intrinsic - extrinsic. Runs with pairs only."""
     if run.periods == 0:

@@ -426,9 +426,9 @@ def test_pairs_draw_each_difference_with_welchs_interval_at_every_evaluation(
             assert want.low < y[p] - 180  # wide: the offsets' spread, not the cells' gap
     zero = [line for line in ax.get_lines() if list(line.get_ydata()) == [0.0, 0.0]]
     assert len(zero) == 1
-    # dotted where comparison.md also reads the pairs: a quarter and half of the run
+    # dotted where comparison.md also reads the pairs: a quarter, half and three quarters
     dotted = [line.get_xdata()[0] for line in ax.get_lines() if line.get_linestyle() == ":"]
-    assert dotted == [1000, 2000]
+    assert dotted == [1000, 2000, 3000]
 
 
 def test_pairs_split_active_by_uncertainty_and_intrinsic_against_extrinsic(

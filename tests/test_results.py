@@ -759,15 +759,16 @@ def test_comparison_pairs_include_active_against_greedy(tmp_path: Path) -> None:
     assert (field(a), field(b)) == ("active", "greedy")
 
 
-def test_every_bernoulli_cell_is_paired_and_pairs_are_read_at_a_quarter_and_half(
+def test_every_bernoulli_cell_is_paired_and_pairs_are_read_at_quarters_of_the_run(
     tmp_path: Path,
 ) -> None:
     """arld_400k's shape: BQSAC with b = 0.1 and b = 0.2 beside one AQSAC and one SAC. Active is
     compared with each Bernoulli cell, named by its b; the unique cells keep their plain names.
-    8 periods of 1,000 steps: every pair is also read at 2,000 and 4,000 env steps (a quarter and
-    half of the run), where eval_return = 100 (cell + 1)(p + 1) + 10 seed gives AQSAC (cell 3) -
-    BQSAC b=0.1 (cell 1) = 200 (p + 1): 400 at 2,000 (p = 1), 800 at 4,000 (p = 3), 1,600 at the
-    end."""
+    8 periods of 1,000 steps: every pair is also read at 2,000, 4,000 and 6,000 env steps (a
+    quarter, half and three quarters of the run), where eval_return = 100 (cell + 1)(p + 1) + 10
+    seed gives AQSAC (cell 3) - BQSAC b=0.1 (cell 1) = 200 (p + 1): 400 at 2,000 (p = 1), 800 at
+    4,000 (p = 3), 1,200 at 6,000, 1,600 at the end. With 8 evaluations the late return would be
+    the last one alone, so there is none."""
     cells = [
         {"strategy": "none"},
         {"strategy": "bernoulli", "query_prob": 0.1},
@@ -780,20 +781,61 @@ def test_every_bernoulli_cell_is_paired_and_pairs_are_read_at_a_quarter_and_half
     pairs = {name: (a, b) for name, a, b in compare.comparison_pairs(run)}
     assert list(pairs) == ["AQSAC - BQSAC b=0.1", "AQSAC - BQSAC b=0.2", "AQSAC - SAC"]
     assert [c.cell for c in pairs["AQSAC - BQSAC b=0.2"]] == [3, 2]
-    assert compare.reading_steps(run) == [2_000, 4_000]
+    assert compare.reading_steps(run) == [2_000, 4_000, 6_000]
     rows = {(r["pair"], r["metric"]): r for r in compare.compare(run, reps=500)}
     for metric, want in (
         ("return at 2,000", 400),
         ("return at 4,000", 800),
+        ("return at 6,000", 1200),
         ("final return", 1600),
     ):
         assert rows[("AQSAC - BQSAC b=0.1", metric)]["diff"] == pytest.approx(want)
+    assert compare.late_evaluations(run) == 0
+    assert not any(metric.startswith("late") for _, metric in rows)
     md = compare.write_comparison(path).read_text()
-    assert "also at 2,000; also at 4,000." in md
+    assert "also at 2,000; also at 4,000; also at 6,000." in md
+    assert "Late return" not in md
     assert "| AQSAC - BQSAC b=0.2 | return at 4,000 | 3 / 3 | 400 [" in md
     # A partial run reads only the steps it has reached, and not its last one.
     partial = write_run_dir(tmp_path / "p", cells, sweep, periods=3, total_periods=8)
     assert compare.reading_steps(rundir.load_run(partial)) == [2_000]
+
+
+def test_late_return_is_the_mean_of_each_runs_last_tenth_of_evaluations(tmp_path: Path) -> None:
+    """20 periods of 1,000 steps: the late return averages each run's last 2 evaluations
+    (19,000 and 20,000). eval_return = 100 (cell + 1)(p + 1) + 10 seed, so AQSAC (cell 1) - SAC
+    (cell 0) = 100 (p + 1): 1,950 over p = 18, 19, against 2,000 at the end; resampling the
+    seeds moves either side's mean by at most 20 (the seed offsets 0, 10, 20), so the bootstrap
+    interval is within 40 of it. A partial directory of 15 periods averages its own last 2
+    (14,000 and 15,000): 1,450."""
+    cells = [{"strategy": "none"}, {"strategy": "active"}]
+    sweep = {"strategy": ["none", "active"]}
+    path = write_run_dir(tmp_path / "late", cells, sweep, periods=20, total_periods=20)
+    run = rundir.load_run(path)
+    assert compare.late_evaluations(run) == 2
+    label = compare.late_return_label(run)
+    assert label == "late return (19,000 to 20,000)"
+    rows = {(r["pair"], r["metric"]): r for r in compare.compare(run, reps=500)}
+    late = rows[("AQSAC - SAC", label)]
+    assert late["diff"] == pytest.approx(1950.0)
+    assert 1930.0 <= late["diff_lo"] <= 1950.0 <= late["diff_hi"] <= 1970.0
+    assert rows[("AQSAC - SAC", "final return")]["diff"] == pytest.approx(2000.0)
+    assert [m for p, m in rows if p == "AQSAC - SAC"] == [
+        "return at 5,000",
+        "return at 10,000",
+        "return at 15,000",
+        "final return",
+        label,
+        "AUC",
+    ]
+    md = compare.write_comparison(path).read_text()
+    assert "Late return: each run's mean return over its last 2 evaluations" in md
+    assert f"| AQSAC - SAC | {label} | 3 / 3 | 1,950 [" in md
+    partial = rundir.load_run(
+        write_run_dir(tmp_path / "partial", cells, sweep, periods=15, total_periods=20)
+    )
+    rows = {(r["pair"], r["metric"]): r for r in compare.compare(partial, reps=500)}
+    assert rows[("AQSAC - SAC", "late return (14,000 to 15,000)")]["diff"] == pytest.approx(1450.0)
 
 
 def test_comparison_pairs_are_named_after_the_agent_family(tmp_path: Path) -> None:
