@@ -34,6 +34,7 @@ from arld_jax.stats import (
     BOOTSTRAP_REPS,
     area_under_curve,
     bootstrap_difference,
+    late_window,
     welch_ci95,
 )
 from arld_jax.summary import cell_name, has_falls, summarize
@@ -86,17 +87,9 @@ def reading_steps(run: RunDir) -> list[int]:
     return [at for at in (total // 4, total // 2, 3 * total // 4) if at in steps[:-1]]
 
 
-LATE_SHARE = 0.1
-"""The late return is each run's mean evaluation return over the last tenth of its evaluations
-present: one evaluation of a few deterministic episodes swings with the policy from one
-evaluation to the next, a mean over the last eight (of a 400k run evaluated every 5k) less so."""
-
-
 def late_evaluations(run: RunDir) -> int:
-    """How many of the last evaluations the late return averages (`LATE_SHARE` of those present,
-    rounded); 0 where that is fewer than two, and the late return would be the final return."""
-    k = round(LATE_SHARE * len(env_steps_axis(run)))
-    return k if k >= 2 else 0
+    """How many of `run`'s last evaluations its late return averages (`stats.late_window`)."""
+    return late_window(len(env_steps_axis(run)))
 
 
 def late_return_label(run: RunDir) -> str:

@@ -83,6 +83,19 @@ def welch_ci95(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     return diff - half, diff + half
 
 
+LATE_SHARE = 0.1
+"""The late return is each run's mean evaluation return over the last tenth of its evaluations
+present: one evaluation of a few deterministic episodes swings with the policy from one
+evaluation to the next, a mean over the last eight (of a 400k run evaluated every 5k) less so."""
+
+
+def late_window(num_evaluations: int) -> int:
+    """How many of the last evaluations the late return averages (`LATE_SHARE` of them, rounded);
+    0 where that is fewer than two, and the late return would be the final return."""
+    k = round(LATE_SHARE * num_evaluations)
+    return k if k >= 2 else 0
+
+
 def area_under_curve(eval_return: np.ndarray, env_steps: np.ndarray) -> np.ndarray:
     """Normalised area under each run's evaluation curve: its mean evaluation return.
 

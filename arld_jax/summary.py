@@ -31,7 +31,7 @@ from arld_jax.rundir import (
     run_field,
     swept_fields,
 )
-from arld_jax.stats import area_under_curve, iqm_ci95, mean_ci95
+from arld_jax.stats import area_under_curve, iqm_ci95, late_window, mean_ci95
 
 STAT_COLUMNS: tuple[str, ...] = (
     "n_seeds",
@@ -40,6 +40,8 @@ STAT_COLUMNS: tuple[str, ...] = (
     "final_return_iqm",
     "final_return_iqm_lo",
     "final_return_iqm_hi",
+    "late_return_mean",
+    "late_return_ci95",
     "auc_mean",
     "auc_ci95",
     "demos_used_mean",
@@ -59,6 +61,7 @@ STAT_COLUMNS: tuple[str, ...] = (
     "episode_length_late_ci95",
     "expert_return",
     "above_expert",
+    "above_expert_late",
     "env_steps_per_second",
     "periods",
     "env_steps",
@@ -175,10 +178,13 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
 
     Row keys: ``cell``, ``cell_label``, ``name`` (`cell_name`: the paper's names), the swept fields' values, then `STAT_COLUMNS`:
     n_seeds; final_return_mean/ci95 (eval return at the last evaluation present);
-    final_return_iqm/_lo/_hi (its interquartile mean and 95% bootstrap interval, `iqm_ci95`); auc_mean/ci95
+    final_return_iqm/_lo/_hi (its interquartile mean and 95% bootstrap interval, `iqm_ci95`);
+    late_return_mean/ci95 (each seed's mean return over its last `late_window` evaluations, nan
+    with fewer than 20 evaluations); auc_mean/ci95
     (`area_under_curve`); demos_used_mean/ci95 (final cumulative demonstrations); expert_return
     (config.json, or nan); above_expert (how many seeds' final return is above the expert's, the
-    paper's "ends above the expert" seed by seed; nan without an expert); env_steps_per_second
+    paper's "ends above the expert" seed by seed; nan without an expert); above_expert_late (the same
+    by the late return; nan without one); env_steps_per_second
     (timing.json, all runs together, or nan); periods
     (evaluation periods present) and env_steps (env steps at the last evaluation present).
     Means and 95% CIs are over the seeds of the cell (`mean_ci95`).
@@ -188,13 +194,15 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
     steps = env_steps_axis(run)
     eval_return = np.asarray(metrics["eval_return"], dtype=np.float64)
     auc = area_under_curve(eval_return, steps)
+    periods = run.periods
+    k = late_window(periods)
+    late = eval_return[:, -k:].mean(axis=1) if k else np.full(eval_return.shape[0], np.nan)
     demos = metrics.get("demos_used")
     flipped, flipped_source = upside_down_late(run)
     asked_flipped, visited_flipped = upside_down_when_asked(run)
     fell, lengths = episodes_late(run)
     expert = expert_return(run)
     sps = float(run.timing.get("env_steps_per_second", math.nan))
-    periods = run.periods
     fields = swept_fields(run)
 
     rows = []
@@ -217,6 +225,7 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
         row["final_return_mean"], row["final_return_ci95"] = mean_ci95(final)
         iqm, lo, hi = iqm_ci95(final)
         row.update(final_return_iqm=iqm, final_return_iqm_lo=lo, final_return_iqm_hi=hi)
+        row["late_return_mean"], row["late_return_ci95"] = mean_ci95(late[idx])
         row["auc_mean"], row["auc_ci95"] = mean_ci95(auc[idx])
         row["demos_used_mean"], row["demos_used_ci95"] = mean_ci95(final_demos)
         row["upside_down_late_mean"], row["upside_down_late_ci95"] = mean_ci95(flipped[idx])
@@ -234,6 +243,9 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
         row["episode_length_late_mean"], row["episode_length_late_ci95"] = mean_ci95(lengths[idx])
         row["expert_return"] = expert
         row["above_expert"] = int(np.sum(final > expert)) if math.isfinite(expert) else math.nan
+        row["above_expert_late"] = (
+            int(np.sum(late[idx] > expert)) if math.isfinite(expert) and k else math.nan
+        )
         row["env_steps_per_second"] = sps
         row["periods"] = int(periods)
         row["env_steps"] = int(steps[-1]) if periods else 0
@@ -308,6 +320,7 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
     cfg = config.get("config", {})
     falls, flips = has_falls(run), has_gait_rule(run)
     asked = any(math.isfinite(row["asked_upside_down_mean"]) for row in rows)
+    k = late_window(run.periods)
     total = int(cfg.get("total_env_steps") or 0)
     last = rows[0]["env_steps"] if rows else 0
     seeds = config.get("seeds", [])
@@ -346,7 +359,16 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
         "middle 3) [95% percentile-bootstrap interval]. AUC: mean evaluation return over all evaluation points present. "
         "Demos: cumulative demonstrated env steps at the end."
         + (
-            " Seeds above the expert: runs whose final return is above the expert's."
+            f" Late return: each seed's mean evaluation return over its last {k} evaluations "
+            f"(from {int(env_steps_axis(run)[-k]):,} env steps; the last tenth of those present), "
+            "less swayed than the final return by the policy's swings from one evaluation to the "
+            "next."
+            if k
+            else ""
+        )
+        + (
+            " Seeds above the expert: runs whose final return is above the expert's"
+            + (" (in brackets: whose late return is)." if k else ".")
             if math.isfinite(expert)
             else ""
         )
@@ -389,6 +411,7 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
         "seeds",
         "final return",
         "final IQM",
+        *(["late return"] if k else []),
         "AUC (mean return)",
         "demos used",
         *(["seeds above the expert"] if math.isfinite(expert) else []),
@@ -406,11 +429,13 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
             str(row["n_seeds"]),
             format_mean_ci(row["final_return_mean"], row["final_return_ci95"]),
             format_iqm(row),
+            *([format_mean_ci(row["late_return_mean"], row["late_return_ci95"])] if k else []),
             format_mean_ci(row["auc_mean"], row["auc_ci95"]),
             format_mean_ci(row["demos_used_mean"], row["demos_used_ci95"]),
         ]
         if math.isfinite(expert):
-            values.append(f"{row['above_expert']} of {row['n_seeds']}")
+            late_above = f" (late: {row['above_expert_late']})" if k else ""
+            values.append(f"{row['above_expert']} of {row['n_seeds']}{late_above}")
         if flips:
             values.append(
                 _format_percent(row["upside_down_late_mean"], row["upside_down_late_ci95"])

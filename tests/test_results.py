@@ -242,6 +242,8 @@ def test_write_summary_csv_schema_and_markdown(run_dir: Path) -> None:
         "final_return_iqm",
         "final_return_iqm_lo",
         "final_return_iqm_hi",
+        "late_return_mean",
+        "late_return_ci95",
         "auc_mean",
         "auc_ci95",
         "demos_used_mean",
@@ -261,6 +263,7 @@ def test_write_summary_csv_schema_and_markdown(run_dir: Path) -> None:
         "episode_length_late_ci95",
         "expert_return",
         "above_expert",
+        "above_expert_late",
         "env_steps_per_second",
         "periods",
         "env_steps",
@@ -296,6 +299,39 @@ def test_seeds_above_the_expert_counted_per_cell(tmp_path: Path) -> None:
     _, md_path = summary.write_summary(run_dir)
     md = md_path.read_text()
     assert "seeds above the expert" in md and "| 2 of 3 |" in md and "| 0 of 3 |" in md
+
+
+def test_late_return_per_cell_and_seeds_above_the_expert_by_it(tmp_path: Path) -> None:
+    """20 evaluations: the late return is each seed's mean over the last 2 (p = 18, 19), i.e.
+    100 (c + 1) 19.5 + 10 s: SAC [1,950, 1,960, 1,970], BQSAC [3,900, 3,910, 3,920], against
+    finals 100 (c + 1) 20 + 10 s: SAC [2,000, 2,010, 2,020]. With the expert at 1,955, all three
+    SAC seeds end above it, two by the late return. 4 evaluations have none (nan, no column)."""
+    run_dir = write_run_dir(
+        tmp_path / "l",
+        NONE_AND_BERNOULLI,
+        {"strategy": ["none", "bernoulli"]},
+        periods=20,
+        total_periods=20,
+        expert=1955.0,
+    )
+    sac, bq = summary.summarize(run_dir)
+    assert sac["late_return_mean"] == pytest.approx(1960.0)
+    assert bq["late_return_mean"] == pytest.approx(3910.0)
+    assert sac["late_return_ci95"] == pytest.approx(HALF_SD10_N3, abs=1e-3)
+    assert (sac["above_expert"], sac["above_expert_late"]) == (3, 2)
+    assert (bq["above_expert"], bq["above_expert_late"]) == (3, 3)
+    _, md_path = summary.write_summary(run_dir)
+    md = md_path.read_text()
+    assert "last 2 evaluations (from 19,000 env steps" in md
+    assert "| late return |" in md
+    assert "| 1960 ± 25 |" in md and "| 3 of 3 (late: 2) |" in md
+    short = write_run_dir(tmp_path / "s", NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]})
+    rows = summary.summarize(short)
+    assert all(
+        math.isnan(r["late_return_mean"]) and math.isnan(r["above_expert_late"]) for r in rows
+    )
+    _, md_path = summary.write_summary(short)
+    assert "late return" not in md_path.read_text().lower()
 
 
 def test_partial_run_is_summarised_over_periods_present(tmp_path: Path) -> None:
