@@ -34,6 +34,7 @@ from arld_jax.stats import (
     BOOTSTRAP_REPS,
     area_under_curve,
     bootstrap_difference,
+    late_return,
     late_window,
     welch_ci95,
 )
@@ -101,16 +102,17 @@ def late_return_label(run: RunDir) -> str:
 
 def compare(run_dir: str | Path | RunDir, reps: int = BOOTSTRAP_REPS, seed: int = 0) -> list[dict]:
     """Pairwise differences of `comparison_pairs` with stratified-bootstrap 95% CIs (rliable's,
-    Agarwal et al. 2021): for the final, the late (`late_evaluations`) and the area-under-curve
-    return, and the return at each of `reading_steps`, the difference of the cells' means over seeds and the probability that a run
-    of a beats a run of b. Rows: pair, metric and the keys of `bootstrap_difference`."""
+    Agarwal et al. 2021): for the final, the late (`stats.late_return`) and the area-under-curve
+    return, and the return at each of `reading_steps`, the difference of the cells' means over
+    seeds and the probability that a run of a beats a run of b. Rows: pair, metric and the keys of
+    `bootstrap_difference`."""
     run = as_run(run_dir)
     eval_return = np.asarray(run.metrics["eval_return"], dtype=np.float64)
     steps = [int(s) for s in env_steps_axis(run)]
     values = {f"return at {at:,}": eval_return[:, steps.index(at)] for at in reading_steps(run)}
     values["final return"] = eval_return[:, -1]
-    if k := late_evaluations(run):
-        values[late_return_label(run)] = eval_return[:, -k:].mean(axis=1)
+    if late_evaluations(run):
+        values[late_return_label(run)] = late_return(eval_return)
     values["AUC"] = area_under_curve(eval_return, env_steps_axis(run))
 
     rows = []
@@ -231,6 +233,7 @@ def write_comparison(run_dir: str | Path | RunDir) -> Path | None:
 
 def comparison_markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
     """comparison.md's text: what the numbers are, at which env steps, then `rows` as a table."""
+    k = late_evaluations(run)
     lines = [
         f"# Pairwise comparison: {run.name}",
         "",
@@ -242,10 +245,10 @@ def comparison_markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
         + "".join(f"; also at {at:,}" for at in reading_steps(run))
         + "."
         + (
-            f" Late return: each run's mean return over its last {late_evaluations(run)} "
-            "evaluations (the last tenth of those present), less swayed than the final return by "
-            "the policy's swings from one evaluation to the next."
-            if late_evaluations(run)
+            f" Late return: each run's mean return over its last {k} evaluations (the last "
+            "tenth of those present), less swayed than the final return by the policy's swings "
+            "from one evaluation to the next."
+            if k
             else ""
         )
         + (" **Partial run directory.**" if run.partial else ""),

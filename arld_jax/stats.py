@@ -96,6 +96,15 @@ def late_window(num_evaluations: int) -> int:
     return k if k >= 2 else 0
 
 
+def late_return(eval_return: np.ndarray) -> np.ndarray:
+    """[R] each run's mean of its last `late_window` evaluations of [R, E] `eval_return`; nan
+    where there is no late window (fewer than 20 evaluations)."""
+    k = late_window(eval_return.shape[1])
+    if not k:
+        return np.full(eval_return.shape[0], np.nan)
+    return eval_return[:, -k:].mean(axis=1)
+
+
 def area_under_curve(eval_return: np.ndarray, env_steps: np.ndarray) -> np.ndarray:
     """Normalised area under each run's evaluation curve: its mean evaluation return.
 

@@ -31,7 +31,7 @@ from arld_jax.rundir import (
     run_field,
     swept_fields,
 )
-from arld_jax.stats import area_under_curve, iqm_ci95, late_window, mean_ci95
+from arld_jax.stats import area_under_curve, iqm_ci95, late_return, late_window, mean_ci95
 
 STAT_COLUMNS: tuple[str, ...] = (
     "n_seeds",
@@ -195,8 +195,7 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
     eval_return = np.asarray(metrics["eval_return"], dtype=np.float64)
     auc = area_under_curve(eval_return, steps)
     periods = run.periods
-    k = late_window(periods)
-    late = eval_return[:, -k:].mean(axis=1) if k else np.full(eval_return.shape[0], np.nan)
+    late = late_return(eval_return)
     demos = metrics.get("demos_used")
     flipped, flipped_source = upside_down_late(run)
     asked_flipped, visited_flipped = upside_down_when_asked(run)
@@ -244,7 +243,9 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
         row["expert_return"] = expert
         row["above_expert"] = int(np.sum(final > expert)) if math.isfinite(expert) else math.nan
         row["above_expert_late"] = (
-            int(np.sum(late[idx] > expert)) if math.isfinite(expert) and k else math.nan
+            int(np.sum(late[idx] > expert))
+            if math.isfinite(expert) and late_window(periods)
+            else math.nan
         )
         row["env_steps_per_second"] = sps
         row["periods"] = int(periods)
