@@ -11,7 +11,8 @@ SAC at sbx's defaults (what a user of sbx gets: 2x256 networks, batch 256, learn
 entropy coefficient tuned automatically), one gradient step per env step, 1 env. Every
 `--eval-every` env steps, `--eval-episodes` deterministic episodes on a separate env (SB3's
 `evaluate_policy`); the JSON holds those returns with the versions and the model's
-hyperparameters.
+hyperparameters. It is rewritten after every evaluation (`"complete": false` until the last
+step), so a run cut short keeps the evaluations it made; sbx cannot resume it.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import argparse
 import importlib.metadata
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 
@@ -61,6 +63,7 @@ def main(argv: list[str] | None = None) -> None:
             self.steps: list[int] = []
             self.returns: list[list[float]] = []
             self.lengths: list[list[int]] = []
+            self.write_report: Callable[[bool], dict] = lambda complete: {}
 
         def _on_step(self) -> bool:
             if self.num_timesteps % self.every == 0:
@@ -74,6 +77,7 @@ def main(argv: list[str] | None = None) -> None:
                 self.steps.append(int(self.num_timesteps))
                 self.returns.append([float(r) for r in returns])
                 self.lengths.append([int(n) for n in lengths])
+                self.write_report(complete=False)
             return True
 
     out = Path(args.out)
@@ -83,41 +87,48 @@ def main(argv: list[str] | None = None) -> None:
     model = SAC("MlpPolicy", env, seed=args.seed, verbose=0)
     evaluate = Evaluate(eval_env, args.eval_every, args.eval_episodes)
     start = time.time()
+
+    def write_report(complete: bool) -> dict:
+        hyper = {
+            k: (v if isinstance(v, int | float | str | bool) or v is None else str(v))
+            for k, v in vars(model).items()
+            if k
+            in (
+                "learning_rate",
+                "buffer_size",
+                "learning_starts",
+                "batch_size",
+                "tau",
+                "gamma",
+                "train_freq",
+                "gradient_steps",
+                "ent_coef",
+                "target_entropy",
+                "policy_kwargs",
+            )
+        }
+        report = {
+            "peer": "sbx SAC",
+            "env": args.env,
+            "seed": args.seed,
+            "steps": args.steps,
+            "complete": complete,
+            "eval_every": args.eval_every,
+            "eval_episodes": args.eval_episodes,
+            "eval_env_steps": evaluate.steps,
+            "eval_returns": evaluate.returns,
+            "eval_lengths": evaluate.lengths,
+            "wall_s": round(time.time() - start, 1),
+            "hyperparameters": hyper,
+            "versions": versions(),
+        }
+        out.write_text(json.dumps(report, indent=1) + "\n")
+        return report
+
+    evaluate.write_report = write_report
     model.learn(total_timesteps=args.steps, callback=evaluate)
-    wall = time.time() - start
-    hyper = {
-        k: (v if isinstance(v, int | float | str | bool) or v is None else str(v))
-        for k, v in vars(model).items()
-        if k
-        in (
-            "learning_rate",
-            "buffer_size",
-            "learning_starts",
-            "batch_size",
-            "tau",
-            "gamma",
-            "train_freq",
-            "gradient_steps",
-            "ent_coef",
-            "target_entropy",
-            "policy_kwargs",
-        )
-    }
-    report = {
-        "peer": "sbx SAC",
-        "env": args.env,
-        "seed": args.seed,
-        "steps": args.steps,
-        "eval_every": args.eval_every,
-        "eval_episodes": args.eval_episodes,
-        "eval_env_steps": evaluate.steps,
-        "eval_returns": evaluate.returns,
-        "eval_lengths": evaluate.lengths,
-        "wall_s": round(wall, 1),
-        "hyperparameters": hyper,
-        "versions": versions(),
-    }
-    out.write_text(json.dumps(report, indent=1) + "\n")
+    report = write_report(complete=True)
+    wall = report["wall_s"]
     final = report["eval_returns"][-1] if report["eval_returns"] else []
     mean = sum(final) / len(final) if final else float("nan")
     print(f"{args.env} seed {args.seed}: final deterministic return {mean:.1f} ({wall:.0f} s)")
