@@ -57,13 +57,15 @@ def main(argv: list[str] | None = None) -> None:
     class Evaluate(BaseCallback):
         """Deterministic episodes on `eval_env` every `every` env steps (1 env: one step per call)."""
 
-        def __init__(self, eval_env: gym.Env, every: int, episodes: int) -> None:
+        def __init__(
+            self, eval_env: gym.Env, every: int, episodes: int, report: Callable[[bool], dict]
+        ) -> None:
             super().__init__()
             self.eval_env, self.every, self.episodes = eval_env, every, episodes
+            self.report = report  # writes the JSON; called after every evaluation
             self.steps: list[int] = []
             self.returns: list[list[float]] = []
             self.lengths: list[list[int]] = []
-            self.write_report: Callable[[bool], dict] = lambda complete: {}
 
         def _on_step(self) -> bool:
             if self.num_timesteps % self.every == 0:
@@ -77,7 +79,7 @@ def main(argv: list[str] | None = None) -> None:
                 self.steps.append(int(self.num_timesteps))
                 self.returns.append([float(r) for r in returns])
                 self.lengths.append([int(n) for n in lengths])
-                self.write_report(complete=False)
+                self.report(False)
             return True
 
     out = Path(args.out)
@@ -85,28 +87,28 @@ def main(argv: list[str] | None = None) -> None:
     env, eval_env = gym.make(args.env), Monitor(gym.make(args.env))
     eval_env.reset(seed=10_000 + args.seed)  # fresh episodes, not the training env's
     model = SAC("MlpPolicy", env, seed=args.seed, verbose=0)
-    evaluate = Evaluate(eval_env, args.eval_every, args.eval_episodes)
+    hyper = {
+        k: (v if isinstance(v, int | float | str | bool) or v is None else str(v))
+        for k, v in vars(model).items()
+        if k
+        in (
+            "learning_rate",
+            "buffer_size",
+            "learning_starts",
+            "batch_size",
+            "tau",
+            "gamma",
+            "train_freq",
+            "gradient_steps",
+            "ent_coef",
+            "target_entropy",
+            "policy_kwargs",
+        )
+    }
+    installed = versions()
     start = time.time()
 
     def write_report(complete: bool) -> dict:
-        hyper = {
-            k: (v if isinstance(v, int | float | str | bool) or v is None else str(v))
-            for k, v in vars(model).items()
-            if k
-            in (
-                "learning_rate",
-                "buffer_size",
-                "learning_starts",
-                "batch_size",
-                "tau",
-                "gamma",
-                "train_freq",
-                "gradient_steps",
-                "ent_coef",
-                "target_entropy",
-                "policy_kwargs",
-            )
-        }
         report = {
             "peer": "sbx SAC",
             "env": args.env,
@@ -120,14 +122,14 @@ def main(argv: list[str] | None = None) -> None:
             "eval_lengths": evaluate.lengths,
             "wall_s": round(time.time() - start, 1),
             "hyperparameters": hyper,
-            "versions": versions(),
+            "versions": installed,
         }
         out.write_text(json.dumps(report, indent=1) + "\n")
         return report
 
-    evaluate.write_report = write_report
+    evaluate = Evaluate(eval_env, args.eval_every, args.eval_episodes, write_report)
     model.learn(total_timesteps=args.steps, callback=evaluate)
-    report = write_report(complete=True)
+    report = write_report(True)
     wall = report["wall_s"]
     final = report["eval_returns"][-1] if report["eval_returns"] else []
     mean = sum(final) / len(final) if final else float("nan")
