@@ -142,3 +142,26 @@ def test_a_mismatched_expert_stops_a_sweep_before_anything_compiles(tmp_path, mo
     with pytest.raises(SystemExit, match="no expert is shipped for task 'ant'"):
         driver.run_sweep(querying(env_name="ant"), out)
     assert not out.exists()
+
+
+@pytest.mark.parametrize("env_name", ["halfcheetah", "hopper"])
+def test_each_shipped_expert_fits_its_task_and_acts_in_range(env_name):
+    """The experts committed under experiments/ load as their task's default expert with its
+    observation and action sizes, and act deterministically within the action bounds; their
+    recorded check on fresh episodes is the one their README quotes (`evaluation.json`)."""
+    from arld_jax.config import Config
+    from arld_jax.envs import make_env
+    from arld_jax.sweep import expert_path_for
+
+    cfg = Config(env_name=env_name, backend="mujoco")
+    path = expert_path_for(cfg)
+    env = make_env(cfg)
+    expert = load_expert(path, env.obs_dim, env.action_dim, env_name=env_name)
+    obs = jax.random.normal(jax.random.key(0), (8, env.obs_dim))
+    action = expert.act(expert.params, obs, jax.random.key(1))
+    assert action.shape == (8, env.action_dim)
+    assert bool(jnp.all(jnp.abs(action) <= 1.0))
+    np.testing.assert_array_equal(action, expert.act(expert.params, obs, jax.random.key(2)))
+    evaluation = json.loads((path / "evaluation.json").read_text())
+    assert evaluation["episodes"] >= 10
+    assert f"{evaluation['return_mean']:,.1f}" in (path / "README.md").read_text()
