@@ -31,6 +31,7 @@ from test_results import (
 )
 
 from arld_jax import plots, rundir
+from arld_jax.stats import mean_ci95_columns
 
 SAC_CELLS = [
     {"strategy": "none"},
@@ -513,6 +514,39 @@ def test_falls_figure_draws_the_fall_share_and_episode_length_per_cell(tmp_path:
     np.testing.assert_allclose(
         _lines(evaluation)["SAC"][1], 100 * _seed_mean(metrics["eval_fell"], cells[0])
     )
+
+
+def test_falls_bands_stay_within_what_a_share_and_a_length_can_be(tmp_path: Path) -> None:
+    """Seeds that split between no falls and all falls (runs 0, 1, 2: 0%, 100%, 0%) give a
+    Student's t interval past both 0 and 100%; the drawn band is that interval cut to [0, 100],
+    a length's band is cut at 0 only, and a band inside the range is drawn as computed."""
+    path = write_run_dir(tmp_path / "f", NONE_AND_BERNOULLI, NONE_AND_BERNOULLI_SWEEP)
+    metrics = _with_falls(path)
+    split = (np.arange(metrics["eval_return"].shape[0]) % 2)[:, None] + np.zeros((1, PERIODS))
+    metrics["fell"] = split
+    metrics["episode_length"] = 10.0 + 890.0 * split
+    np.savez(path / "metrics.npz", **metrics)
+    _, cells = _files(path)
+    fell, length, _ = _make(plots.fig_falls(rundir.load_run(path))).axes
+    for ax, name, scale, (low, high) in (
+        (fell, "fell", 100.0, (0.0, 100.0)),
+        (length, "episode_length", 1.0, (0.0, np.inf)),
+    ):
+        for c, runs in enumerate(cells.values()):
+            mean, half = mean_ci95_columns(scale * metrics[name][runs])
+            assert (mean - half < low).all()  # the interval itself reaches below the range
+            band = _band(ax, c)
+            drawn = np.array([band[x] for x in sorted(band)])
+            np.testing.assert_allclose(drawn[:, 0], np.clip(mean - half, low, high))
+            np.testing.assert_allclose(drawn[:, 1], np.clip(mean + half, low, high))
+        if name == "fell":
+            assert (drawn[:, 1] == 100.0).all()  # and above it, for a share
+    metrics["episode_length"] = 100.0 + np.arange(split.shape[0])[:, None] + 0 * split
+    np.savez(path / "metrics.npz", **metrics)
+    length = _make(plots.fig_falls(rundir.load_run(path))).axes[1]
+    mean, half = mean_ci95_columns(metrics["episode_length"][cells[0]])
+    band = _band(length, 0)
+    np.testing.assert_allclose([band[x] for x in sorted(band)], np.c_[mean - half, mean + half])
 
 
 # ---------------------------------------------------------------- plot_all: which files
