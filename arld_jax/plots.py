@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from matplotlib import colormaps
@@ -494,25 +494,36 @@ NON_NEGATIVE = (0.0, np.inf)
 """The range of a count or a length."""
 
 
-def _cell_bands(
-    run: Run, panels: list[tuple[str, str, str, float, tuple[float, float]]], suptitle: str
-) -> Figure:
-    """One panel per (metric, title, y label, scale, range): the metric per period and cell, mean
-    and 95% CI over seeds (periods where a seed has no value, nan, are left out of that seed's
-    mean). The band is cut to the metric's range: Student's t interval of a few seeds' shares can
-    reach past 100% or below 0, where the true mean cannot be, so the cut band still covers it."""
+class Panel(NamedTuple):
+    """One panel of `_cell_bands`: a metric of `metrics.npz` drawn as `scale` x its value, with
+    the range its mean can take (its 95% band is cut to it)."""
+
+    metric: str
+    title: str
+    ylabel: str
+    scale: float
+    bounds: tuple[float, float]
+
+
+def _cell_bands(run: Run, panels: list[Panel], suptitle: str) -> Figure:
+    """One panel per `Panel`: the metric per period and cell, mean and 95% CI over seeds (periods
+    where a seed has no value, nan, are left out of that seed's mean). The band is cut to the
+    panel's bounds: Student's t interval of a few seeds' shares can reach past 100% or below 0,
+    where the true mean cannot be, so the cut band still covers it."""
     metrics, cells, steps = run.metrics, group_cells(run), env_steps_axis(run)
     colors = _cell_colors(cells)
     fig, axes = _new_figure(ncols=len(panels))
-    for ax, (name, title, ylabel, scale, (low, high)) in zip(axes, panels, strict=True):
+    for ax, panel in zip(axes, panels, strict=True):
+        low, high = panel.bounds
         for cell in cells:
-            mean, half = mean_ci95_columns(scale * np.asarray(metrics[name], float)[cell.runs])
+            values = panel.scale * np.asarray(metrics[panel.metric], float)[cell.runs]
+            mean, half = mean_ci95_columns(values)
             color = colors[cell.cell]
             ax.plot(steps, mean, color=color, lw=1.5, label=cell_name(run, cell))
             band = np.clip(mean - half, low, high), np.clip(mean + half, low, high)
             _interval_band(ax, steps, *band, color)
-        ax.set_ylabel(ylabel)
-        ax.set_title(title, fontsize=10)
+        ax.set_ylabel(panel.ylabel)
+        ax.set_title(panel.title, fontsize=10)
         _steps_axis(ax)
         _legend(ax)
     fig.suptitle(suptitle + _partial_note(run))
@@ -529,7 +540,7 @@ def fig_gait(run: Run) -> Figure | None:
         return None
     ylabel = "% of states upside down (|pitch| > 90°)"
     panels = [
-        (name, f"Gait: {title}", ylabel, 100.0, PERCENT)
+        Panel(name, f"Gait: {title}", ylabel, 100.0, PERCENT)
         for name, title in (
             ("upside_down", "visited training states"),
             ("eval_upside_down", "evaluation"),
@@ -550,9 +561,17 @@ def fig_falls(run: Run) -> Figure | None:
     if run.periods == 0 or not has_falls(run):
         return None
     panels = [
-        ("fell", "Training episodes that fell", "% of finished episodes", 100.0, PERCENT),
-        ("episode_length", "Training episode length", "mean length (env steps)", 1.0, NON_NEGATIVE),
-        ("eval_fell", "Evaluation episodes that fell", "% of evaluation episodes", 100.0, PERCENT),
+        Panel("fell", "Training episodes that fell", "% of finished episodes", 100.0, PERCENT),
+        Panel(
+            "episode_length",
+            "Training episode length",
+            "mean length (env steps)",
+            1.0,
+            NON_NEGATIVE,
+        ),
+        Panel(
+            "eval_fell", "Evaluation episodes that fell", "% of evaluation episodes", 100.0, PERCENT
+        ),
     ]
     return _cell_bands(run, panels, "Falls and episode length, mean and 95% CI over seeds")
 
