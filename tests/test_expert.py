@@ -144,7 +144,7 @@ def test_a_mismatched_expert_stops_a_sweep_before_anything_compiles(tmp_path, mo
     assert not out.exists()
 
 
-@pytest.mark.parametrize("env_name", ["halfcheetah", "hopper", "walker2d"])
+@pytest.mark.parametrize("env_name", ["halfcheetah", "hopper", "walker2d", "ant"])
 def test_each_shipped_expert_fits_its_task_and_acts_in_range(env_name):
     """The experts committed under experiments/ load as their task's default expert with its
     observation and action sizes, and act deterministically within the action bounds; their
