@@ -306,6 +306,15 @@ def run_sweep(
     return {"metrics": metrics, "complete": bool(complete), "state": state, "timing": timing}
 
 
+def _from_cwd(path: Path) -> Path:
+    """`path` relative to the working directory when it lies inside it, else as given: what an
+    exported expert records of its run, so that a shipped one reads the same on any machine."""
+    try:
+        return Path(path).resolve().relative_to(Path.cwd())
+    except ValueError:
+        return Path(path)
+
+
 def expert_for(cfg: Config):  # noqa: ANN202
     """The expert that runs of `cfg` ask (`sweep.expert_path_for`: `--expert_path`, else the
     task's shipped one, else the toy tasks' closed-form expert), checked against the task before
@@ -438,7 +447,7 @@ def export_expert(run_dir: Path, out: Path | None = None) -> Path:
             for r, ret in zip(runs, latest, strict=True)
         },
         "training_command": saved.get("command"),
-        "training_run": str(run_dir),
+        "training_run": str(_from_cwd(run_dir)),
     }
     path = save_expert(out, actor, meta)
     print(

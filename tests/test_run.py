@@ -498,7 +498,7 @@ def test_shipped_expert_runs_as_well_in_mujoco_c_physics(capsys):
     assert "(halfcheetah, mujoco): deterministic return" in out and "upside down" in out
 
 
-def test_export_expert_from_a_run_acts_like_its_best_actor(uninterrupted, tmp_path):
+def test_export_expert_from_a_run_acts_like_its_best_actor(uninterrupted, tmp_path, monkeypatch):
     import jax
 
     from arld_jax.envs import make_env
@@ -511,6 +511,10 @@ def test_export_expert_from_a_run_acts_like_its_best_actor(uninterrupted, tmp_pa
     final = np.load(full / rundir.METRICS_FILE)["eval_return"][:, -1]
     assert meta["eval_return"] == pytest.approx(float(final.max()))
     assert meta["train_env_steps"] == sweep.cfg.total_env_steps
+    assert meta["training_run"] == str(full)  # outside the working directory: as given
+    monkeypatch.chdir(full.parent)  # inside it: relative, as a shipped expert names its run
+    driver.export_expert(full, tmp_path / "again")
+    assert json.loads((tmp_path / "again" / "expert.json").read_text())["training_run"] == full.name
     env = make_env(sweep.cfg)
     expert = load_expert(tmp_path / "expert", env.obs_dim, env.action_dim)
     ret = evaluate_policy(
