@@ -31,12 +31,12 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import importlib.metadata
 import json
 import os
 import platform
 import re
 import shlex
+import shutil
 import signal
 import subprocess
 import sys
@@ -45,27 +45,19 @@ import time
 from pathlib import Path
 from typing import Any
 
+from benchmarks.harness import PACKAGES as REPORTED
+from benchmarks.harness import package_versions
+
 REPO_ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = (
-    "jax", "jaxlib", "jax-cuda12-plugin", "jax-cuda13-plugin", "flax", "optax", "chex", "brax",
-    "mujoco", "mujoco-mjx", "orbax-checkpoint", "numpy", "scipy", "pytest", "pytest-xdist",
+    *REPORTED, "jax-cuda12-plugin", "jax-cuda13-plugin", "chex", "orbax-checkpoint", "scipy",
+    "pytest", "pytest-xdist",
 )  # fmt: skip
 COMPILED = re.compile(r"compiled in (\d+) s; (\d+) runs x ([\d,]+) env steps")
 PERIOD = re.compile(r"^period (\d+)/(\d+)( \(warm-up\))? \|.*\| ([\d,]+) env steps/s \(all runs\)")
 PYTEST_SUMMARY = re.compile(
     r"(\d+ (?:passed|failed|errors?|skipped|deselected|xfailed|xpassed)(?:, \d+ \w+)*) in ([\d.]+)s"
 )
-
-
-def versions() -> dict[str, str | None]:
-    """Installed version of each package that the run depends on (None where absent)."""
-    found: dict[str, str | None] = {}
-    for pkg in PACKAGES:
-        try:
-            found[pkg] = importlib.metadata.version(pkg)
-        except importlib.metadata.PackageNotFoundError:
-            found[pkg] = None
-    return found
 
 
 def device_info() -> dict[str, Any]:
@@ -78,7 +70,7 @@ def device_info() -> dict[str, Any]:
             capture_output=True,
             text=True,
         )
-        if _has("nvidia-smi")
+        if shutil.which("nvidia-smi")
         else None
     )
     backend = out.stdout.strip().splitlines()[-1].split(" ", 2) if out.returncode == 0 else None
@@ -91,10 +83,6 @@ def device_info() -> dict[str, Any]:
         "cpu_count": os.cpu_count(),
         "python": platform.python_version(),
     }
-
-
-def _has(program: str) -> bool:
-    return any((Path(p) / program).exists() for p in os.environ.get("PATH", "").split(os.pathsep))
 
 
 def run_stage(cmd: list[str], log_path: Path, deadline: float, env: dict[str, str]) -> dict:
@@ -171,7 +159,7 @@ def main(argv: list[str] | None = None) -> None:
     report: dict[str, Any] = {
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
         "command": shlex.join(["python", "-m", "benchmarks.gpu_check", *(argv or sys.argv[1:])]),
-        "versions": versions(),
+        "versions": package_versions(PACKAGES),
         "device": device_info(),
         "xla_flags": os.environ.get("XLA_FLAGS", ""),
     }

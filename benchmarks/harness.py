@@ -150,15 +150,25 @@ def _json_default(x: Any) -> Any:
     return str(x)
 
 
+PACKAGES = ("jax", "jaxlib", "brax", "mujoco", "mujoco-mjx", "flax", "optax", "numpy")
+"""The packages whose versions a report records."""
+
+
+def package_versions(packages: Sequence[str] = PACKAGES) -> dict[str, str | None]:
+    """The installed version of each package (None where it is not installed)."""
+    found: dict[str, str | None] = {}
+    for pkg in packages:
+        try:
+            found[pkg] = importlib.metadata.version(pkg)
+        except importlib.metadata.PackageNotFoundError:
+            found[pkg] = None
+    return found
+
+
 def machine_info(args: argparse.Namespace) -> dict[str, Any]:
     """Versions, CPU model and flags, core count, date, load and the command (as run from the
     repository root, without this machine's interpreter path)."""
-    versions = {}
-    for pkg in ("jax", "jaxlib", "brax", "mujoco", "mujoco-mjx", "flax", "optax", "numpy"):
-        try:
-            versions[pkg] = importlib.metadata.version(pkg)
-        except importlib.metadata.PackageNotFoundError:
-            versions[pkg] = None
+    versions = package_versions()
     cpuinfo = Path("/proc/cpuinfo").read_text() if Path("/proc/cpuinfo").exists() else ""
     model = next(
         (ln.split(":", 1)[1].strip() for ln in cpuinfo.splitlines() if "model name" in ln), ""
