@@ -14,35 +14,32 @@ import numpy as np
 
 from arld_jax.config import Config
 from arld_jax.envs import make_env
+from arld_jax.evaluate import rollout
 from arld_jax.expert import load_expert
 from arld_jax.sweep import expert_path_for
-from arld_jax.tasks.base import select_envs
 
 EPISODES, LENGTH, DT = 10, 1000, 0.05
 
 cfg = Config(env_name="ant", backend="mujoco")
 env = make_env(cfg)
 expert = load_expert(expert_path_for(cfg), env.obs_dim, env.action_dim, env_name="ant")
+policy = lambda obs: expert.act(expert.params, obs, jax.random.key(0))  # noqa: E731 (tanh(mu))
 
 
-def step(carry, _):
-    state, alive = carry
-    action = expert.act(expert.params, state.obs, jax.random.key(0))  # deterministic: tanh(mu)
-    nxt = env.step(state, action)
-    reward = jnp.where(alive, nxt.reward, 0.0)
-    ctrl = jnp.where(alive, 0.5 * jnp.sum(action**2, -1), 0.0)
-    nxt = select_envs(alive, nxt, state)  # an episode that ended stays frozen, as in evaluation
-    return (nxt, alive & ~(nxt.terminated > 0)), (reward, ctrl, alive)
+def control_cost_step(state, action):
+    """The task's step, its reward replaced by the control cost it charged, 0.5 |a|^2."""
+    return env.step(state, action).replace(reward=0.5 * jnp.sum(action**2, -1))
 
 
-@jax.jit
-def episodes(key):
-    carry = (env.reset(key, EPISODES), jnp.ones(EPISODES, bool))
-    _, (reward, ctrl, alive) = jax.lax.scan(step, carry, None, length=LENGTH)
-    return reward.sum(0), ctrl.sum(0), alive.sum(0)
-
-
-ret, ctrl, steps = map(np.asarray, episodes(jax.random.key(777)))
+# The same key, the same deterministic policy: the same episodes, summed twice.
+key = jax.random.key(777)
+played = jax.jit(lambda k: rollout(env, policy, k, EPISODES, LENGTH))(key)
+charged = jax.jit(
+    lambda k: rollout(env._replace(step=control_cost_step), policy, k, EPISODES, LENGTH)
+)(key)
+ret, steps, ctrl = (
+    np.asarray(x) for x in (played.episode_return, played.length, charged.episode_return)
+)
 forward = ret - steps + ctrl
 for name, values in [
     ("return", ret),
