@@ -112,7 +112,24 @@ def physics_line(cfg: Config, platform: str) -> str:
         if cfg.backend == auto
         else f"chosen by --backend or the preset; auto would take {auto} on {platform}"
     )
-    return f"physics: {cfg.backend} ({PHYSICS[cfg.backend]}; {how})"
+    solver = solver_options(cfg)
+    told = "".join(f", {v} {SOLVER_WORDS[k]}" for k, v in solver.items())
+    return f"physics: {cfg.backend} ({PHYSICS[cfg.backend]}; {how}{told})"
+
+
+SOLVER_FIELDS: dict[str, str] = {
+    "solver_iterations": "iterations",
+    "solver_ls_iterations": "ls_iterations",
+}
+"""Each solver field of `Config` and the MuJoCo option (`opt.*`) it sets."""
+SOLVER_WORDS: dict[str, str] = {"iterations": "solver iterations", "ls_iterations": "line searches"}
+"""Each MuJoCo solver option in words (the line a run starts with)."""
+
+
+def solver_options(cfg: Config) -> dict[str, int]:
+    """The MuJoCo solver options `cfg` sets over the task's own (`opt.*` name -> value); empty
+    when every solver field is 0 (the task's own, Brax's)."""
+    return {opt: getattr(cfg, f) for f, opt in SOLVER_FIELDS.items() if getattr(cfg, f)}
 
 
 ENVS: tuple[str, ...] = tuple(TASKS)
@@ -126,6 +143,8 @@ PHYSICS: dict[str, str] = {
     "spring": "Brax's spring pipeline",
 }
 """Each physics of `Config.backend`, in words (the line a run starts with)."""
+MUJOCO_BACKENDS: tuple[str, ...] = ("mjx", "mujoco")
+"""The physics that run MuJoCo's solver (its options: `Config.solver_iterations`)."""
 BACKENDS: tuple[str, ...] = ("auto", *PHYSICS)
 REDUCTIONS: tuple[str, ...] = ("mean", "max", "sum")
 WINDOW_RECORDS: tuple[str, ...] = ("all", "agent")
@@ -153,6 +172,16 @@ class Config(*AGENT_OPTIONS):
     observation, reward and health rule, a step many times cheaper than MJX's on CPU
     (`arld_jax.physics`). Or one of Brax's own pipelines ('generalized', 'positional', 'spring').
     The toy tasks ignore it."""
+    solver_iterations: int = 0
+    """Physics of a Brax task on 'mjx' or 'mujoco': iterations of MuJoCo's constraint solver per
+    physics step (`opt.iterations`). 0 (the default) = the task's own, as Brax defines it: 4 from
+    Brax's XMLs (HalfCheetah, Hopper, Walker2d), 1 for Ant and Humanoid, where Brax sets Newton's
+    solver with 1 iteration and 4 line searches for MJX's speed. MuJoCo's default, the one
+    Gymnasium's v5 tasks run, is 100 (the solver stops earlier once it meets its tolerance)."""
+    solver_ls_iterations: int = 0
+    """Physics of a Brax task on 'mjx' or 'mujoco': line-search iterations of the solver
+    (`opt.ls_iterations`). 0 (the default) = the task's own: 50 from Brax's XMLs, 4 for Ant and
+    Humanoid. MuJoCo's default (Gymnasium's v5 tasks) is 50."""
     num_envs: int = 1
     """Environments stepped in parallel per run (vmapped). The paper uses one."""
     env_max_batch: int = 0
@@ -427,6 +456,17 @@ def validate(cfg: Config) -> None:
     checks.choice(cfg, "agent", AGENT_NAMES)
     checks.choice(cfg, "env_name", ENVS)
     checks.choice(cfg, "backend", BACKENDS)
+    for name in SOLVER_FIELDS:
+        value = getattr(cfg, name)
+        if not checks.is_int(value) or value < 0:
+            checks.fail(name, value, "an integer >= 1, or 0 (the task's own)")
+        if value and (TASKS[cfg.env_name].brax_name is None or cfg.backend not in MUJOCO_BACKENDS):
+            checks.fail(
+                name,
+                value,
+                f"0 with env_name {cfg.env_name!r} and backend {cfg.backend!r} (MuJoCo's solver "
+                f"options apply to a Brax task on {' or '.join(map(repr, MUJOCO_BACKENDS))})",
+            )
     checks.choice(cfg, "strategy", STRATEGIES)
     checks.choice(cfg, "uncertainty", UNCERTAINTIES)
     checks.choice(cfg, "uncertainty_reduce", REDUCTIONS)

@@ -58,9 +58,13 @@ if TYPE_CHECKING:
 # ---------------------------------------------------------------- building a Brax task
 
 
-def brax_task_env(spec: TaskSpec, backend: str) -> Env:
-    """The batched env of the Brax task `spec` on `backend` (see the module docstring)."""
+def brax_task_env(spec: TaskSpec, backend: str, solver: dict[str, int] | None = None) -> Env:
+    """The batched env of the Brax task `spec` on `backend` (see the module docstring), with
+    MuJoCo's solver options `solver` (`opt.*` name -> value, e.g. {'iterations': 100}) over the
+    task's own: set on Brax's `sys`, which MJX steps and the C engine's model copies (`_c_model`)."""
     brax_env = load_brax_env(spec.brax_name, "mjx" if backend == "mujoco" else backend)
+    if solver:
+        brax_env.sys = brax_env.sys.tree_replace({f"opt.{k}": v for k, v in solver.items()})
     # Brax's health rule is on exactly when its env says so; the loop needs it statically.
     brax_terminates = bool(getattr(brax_env, "_terminate_when_unhealthy", False))
     if brax_terminates != spec.can_terminate:

@@ -89,6 +89,32 @@ def test_auto_backend_is_resolved_when_the_config_is_built(monkeypatch, platform
     line = config.physics_line(cfg.replace(backend=other), platform)
     assert f"auto would take {physics} on {platform}" in line
     assert "does not apply" in config.physics_line(config.tiny(), platform)
+    solver = cfg.replace(env_name="ant", solver_iterations=100, solver_ls_iterations=50)
+    assert config.solver_options(solver) == {"iterations": 100, "ls_iterations": 50}
+    assert config.physics_line(solver, platform).endswith(
+        ", 100 solver iterations, 50 line searches)"
+    )
+    assert config.solver_options(cfg) == {} and "solver" not in config.physics_line(cfg, platform)
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        (dict(solver_iterations=-1), "solver_iterations = -1 is invalid: allowed an integer >= 1"),
+        (dict(solver_ls_iterations=2.5), "solver_ls_iterations = 2.5 is invalid"),
+        (dict(solver_iterations=True), "solver_iterations = True is invalid"),
+        (
+            dict(env_name="toy", solver_iterations=10),
+            "allowed 0 with env_name 'toy' and backend 'mujoco' \\(MuJoCo's solver options apply",
+        ),
+        (dict(backend="spring", solver_ls_iterations=10), "backend 'spring'"),
+    ],
+)
+def test_solver_options_are_checked(changes, message) -> None:
+    """A solver option is a whole number >= 0, and nonzero only where MuJoCo's solver runs."""
+    base = dict(env_name="ant", backend="mujoco")
+    with pytest.raises(ValueError, match=message):
+        config.Config(**{**base, **changes})
 
 
 def test_warmup_periods_count_every_period_with_a_random_step() -> None:

@@ -56,6 +56,41 @@ def test_every_brax_task_has_a_module_and_checked_options():
     assert (ant.opt.iterations, ant.opt.ls_iterations) == (1, 4)
 
 
+def test_solver_options_reach_both_engines():
+    """`--solver_iterations` / `--solver_ls_iterations` set MuJoCo's solver on both backends: Ant
+    with its own options given explicitly (1 iteration, 4 line searches) is the default Ant, bit
+    for bit on the C engine and as the same traced MJX step; with MuJoCo's defaults (100, 50) the
+    C engine's steps from the same states differ, and MJX traces a different step."""
+
+    def ant(backend, iterations, ls_iterations):
+        cfg = Config(
+            env_name="ant",
+            backend=backend,
+            solver_iterations=iterations,
+            solver_ls_iterations=ls_iterations,
+        )
+        return make_env(cfg)
+
+    def c_steps(env):
+        state = jax.jit(env.reset, static_argnums=1)(jax.random.key(6), 2)
+        step = jax.jit(env.step)
+        for i in range(20):  # enough for the feet to land: contacts are what the solver solves
+            action = jax.random.uniform(jax.random.key(i), (2, 8), minval=-1.0, maxval=1.0)
+            state = step(state, action)
+        return np.asarray(state.obs)
+
+    own, explicit, mujoco = (c_steps(ant("mujoco", *s)) for s in ((0, 0), (1, 4), (100, 50)))
+    np.testing.assert_array_equal(explicit, own)
+    assert float(np.max(np.abs(mujoco - own))) > 1e-4
+
+    def mjx_step(env):
+        state = jax.eval_shape(lambda k: env.reset(k, 2), jax.random.key(0))
+        return str(jax.make_jaxpr(env.step)(state, jnp.zeros((2, env.action_dim))))
+
+    own, explicit, mujoco = (mjx_step(ant("mjx", *s)) for s in ((0, 0), (1, 4), (100, 50)))
+    assert explicit == own and mujoco != own
+
+
 def test_a_wrong_task_name_is_refused_with_the_task_list():
     """`Config.env_name`'s choices are the task modules (a new task is one module)."""
     assert tuple(REGISTRY) == ENVS
