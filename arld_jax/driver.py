@@ -431,6 +431,7 @@ def export_expert(run_dir: Path, out: Path | None = None) -> Path:
     meta = {
         "env_name": cfg.env_name,
         "backend": cfg.backend,
+        **{f: getattr(cfg, f) for f in config_mod.SOLVER_FIELDS if getattr(cfg, f)},
         "obs_dim": env.obs_dim,
         "action_dim": env.action_dim,
         "hidden_sizes": list(cfg.hidden_sizes),
@@ -498,6 +499,15 @@ def write_group_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
             log(f"figure: {path}")
 
 
+def expert_config(meta: dict[str, Any], backend: str | None = None) -> Config:
+    """The Config an expert's episodes are played in: its task and the physics it was trained in
+    (backend, and MuJoCo's solver options where its run set them), or the backend `backend`."""
+    solver = {f: meta[f] for f in config_mod.SOLVER_FIELDS if f in meta}
+    return Config(
+        env_name=meta["env_name"], backend=backend or meta.get("backend", "mjx"), **solver
+    )
+
+
 def evaluate_expert(
     path: Path, episodes: int = 10, seed: int = 12345, backend: str | None = None
 ) -> dict[str, Any]:
@@ -505,7 +515,8 @@ def evaluate_expert(
     random initial states, seed `seed`, not a training seed) and report the mean return with its
     95% CI, every episode's return, the share of its states upside down (`env.upside_down`), the share
     of episodes that ended by a fall and their mean length.
-    `backend`: the physics to roll out in (`Config.backend`); None = the one it was trained in."""
+    `backend`: the physics to roll out in (`Config.backend`); None = the one it was trained in
+    (`expert_config`)."""
     import jax
 
     from arld_jax.envs import make_env
@@ -514,7 +525,7 @@ def evaluate_expert(
     from arld_jax.stats import mean_ci95
 
     meta = read_expert_meta(path)
-    cfg = Config(env_name=meta["env_name"], backend=backend or meta.get("backend", "mjx"))
+    cfg = expert_config(meta, backend)
     env = make_env(cfg)
     expert = load_expert(path, env.obs_dim, env.action_dim)
 
@@ -528,6 +539,7 @@ def evaluate_expert(
         "path": str(path),
         "env_name": cfg.env_name,
         "backend": cfg.backend,
+        **{f: getattr(cfg, f) for f in config_mod.SOLVER_FIELDS if getattr(cfg, f)},
         "episodes": episodes,
         "seed": seed,
         "return_mean": mean,

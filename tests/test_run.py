@@ -486,6 +486,20 @@ def test_evaluate_expert_rolls_out_fresh_episodes(uninterrupted, tmp_path, capsy
         run.main(["evaluate_expert", str(tmp_path / "expert"), "--episodes", "1"])
 
 
+def test_an_expert_plays_in_the_physics_it_was_trained_in():
+    """`evaluate_expert` rebuilds the expert's physics from its metadata: its backend, and
+    MuJoCo's solver options where its run set them (an exported expert records them only then);
+    `--backend` changes the engine, not the solver."""
+    meta = {"env_name": "ant", "backend": "mujoco"}
+    cfg = driver.expert_config(meta)
+    assert (cfg.backend, cfg.solver_iterations, cfg.solver_ls_iterations) == ("mujoco", 0, 0)
+    solver = meta | {"solver_iterations": 100, "solver_ls_iterations": 50}
+    cfg = driver.expert_config(solver, backend="mjx")
+    assert (cfg.backend, cfg.solver_iterations, cfg.solver_ls_iterations) == ("mjx", 100, 50)
+    with pytest.raises(ValueError, match="solver_iterations = 100 is invalid"):
+        driver.expert_config(solver, backend="spring")
+
+
 def test_shipped_expert_runs_as_well_in_mujoco_c_physics(capsys):
     """`evaluate_expert --backend mujoco`: the shipped expert, trained in MJX, keeps its upright
     running gait when MuJoCo's C engine steps the same model (it is the same task), and the report
@@ -511,6 +525,7 @@ def test_export_expert_from_a_run_acts_like_its_best_actor(uninterrupted, tmp_pa
     final = np.load(full / rundir.METRICS_FILE)["eval_return"][:, -1]
     assert meta["eval_return"] == pytest.approx(float(final.max()))
     assert meta["train_env_steps"] == sweep.cfg.total_env_steps
+    assert "solver_iterations" not in meta  # recorded only where the run set MuJoCo's solver
     assert meta["training_run"] == str(full)  # outside the working directory: as given
     monkeypatch.chdir(full.parent)  # inside it: relative, as a shipped expert names its run
     driver.export_expert(full, tmp_path / "again")
