@@ -126,10 +126,15 @@ SOLVER_WORDS: dict[str, str] = {"iterations": "solver iterations", "ls_iteration
 """Each MuJoCo solver option in words (the line a run starts with)."""
 
 
+def solver_settings(cfg: Config) -> dict[str, int]:
+    """The solver fields `cfg` sets (field name -> value); empty when every one is 0 (the task's
+    own, Brax's). What a run's records (an exported expert, its evaluation) add to name them."""
+    return {f: getattr(cfg, f) for f in SOLVER_FIELDS if getattr(cfg, f)}
+
+
 def solver_options(cfg: Config) -> dict[str, int]:
-    """The MuJoCo solver options `cfg` sets over the task's own (`opt.*` name -> value); empty
-    when every solver field is 0 (the task's own, Brax's)."""
-    return {opt: getattr(cfg, f) for f, opt in SOLVER_FIELDS.items() if getattr(cfg, f)}
+    """The MuJoCo solver options `cfg` sets over the task's own (`opt.*` name -> value)."""
+    return {SOLVER_FIELDS[f]: v for f, v in solver_settings(cfg).items()}
 
 
 ENVS: tuple[str, ...] = tuple(TASKS)

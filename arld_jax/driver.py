@@ -431,7 +431,7 @@ def export_expert(run_dir: Path, out: Path | None = None) -> Path:
     meta = {
         "env_name": cfg.env_name,
         "backend": cfg.backend,
-        **{f: getattr(cfg, f) for f in config_mod.SOLVER_FIELDS if getattr(cfg, f)},
+        **config_mod.solver_settings(cfg),
         "obs_dim": env.obs_dim,
         "action_dim": env.action_dim,
         "hidden_sizes": list(cfg.hidden_sizes),
@@ -539,7 +539,7 @@ def evaluate_expert(
         "path": str(path),
         "env_name": cfg.env_name,
         "backend": cfg.backend,
-        **{f: getattr(cfg, f) for f in config_mod.SOLVER_FIELDS if getattr(cfg, f)},
+        **config_mod.solver_settings(cfg),
         "episodes": episodes,
         "seed": seed,
         "return_mean": mean,

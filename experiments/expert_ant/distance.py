@@ -20,32 +20,33 @@ from arld_jax.sweep import expert_path_for
 
 EPISODES, LENGTH, DT = 10, 1000, 0.05
 
-cfg = Config(env_name="ant", backend="mujoco")
-env = make_env(cfg)
-expert = load_expert(expert_path_for(cfg), env.obs_dim, env.action_dim, env_name="ant")
-policy = lambda obs: expert.act(expert.params, obs, jax.random.key(0))  # noqa: E731 (tanh(mu))
+
+def expert_episodes(cfg: Config, reward=None):  # noqa: ANN001, ANN201
+    """The shipped Ant expert's deterministic episodes (tanh(mu)) from the fresh initial states of
+    key 777 in the physics of `cfg`; `reward(state, action)`, if given, replaces the step's reward
+    (the same episodes, another sum)."""
+    env = make_env(cfg)
+    if reward is not None:
+        step = env.step
+        env = env._replace(step=lambda s, a: step(s, a).replace(reward=reward(s, a)))
+    expert = load_expert(expert_path_for(cfg), env.obs_dim, env.action_dim, env_name="ant")
+    policy = lambda obs: expert.act(expert.params, obs, jax.random.key(0))  # noqa: E731
+    return jax.jit(lambda k: rollout(env, policy, k, EPISODES, LENGTH))(jax.random.key(777))
 
 
-def control_cost_step(state, action):
-    """The task's step, its reward replaced by the control cost it charged, 0.5 |a|^2."""
-    return env.step(state, action).replace(reward=0.5 * jnp.sum(action**2, -1))
-
-
-# The same key, the same deterministic policy: the same episodes, summed twice.
-key = jax.random.key(777)
-played = jax.jit(lambda k: rollout(env, policy, k, EPISODES, LENGTH))(key)
-charged = jax.jit(
-    lambda k: rollout(env._replace(step=control_cost_step), policy, k, EPISODES, LENGTH)
-)(key)
-ret, steps, ctrl = (
-    np.asarray(x) for x in (played.episode_return, played.length, charged.episode_return)
-)
-forward = ret - steps + ctrl
-for name, values in [
-    ("return", ret),
-    ("steps", steps),
-    ("control cost", ctrl),
-    ("sum of x velocities", forward),
-    ("distance along x, m", forward * DT),
-]:
-    print(f"{name:>20}: " + " ".join(f"{v:7.1f}" for v in values))
+if __name__ == "__main__":
+    cfg = Config(env_name="ant", backend="mujoco")
+    played = expert_episodes(cfg)
+    charged = expert_episodes(cfg, reward=lambda s, a: 0.5 * jnp.sum(a**2, -1))  # control cost
+    ret, steps, ctrl = (
+        np.asarray(x) for x in (played.episode_return, played.length, charged.episode_return)
+    )
+    forward = ret - steps + ctrl
+    for name, values in [
+        ("return", ret),
+        ("steps", steps),
+        ("control cost", ctrl),
+        ("sum of x velocities", forward),
+        ("distance along x, m", forward * DT),
+    ]:
+        print(f"{name:>20}: " + " ".join(f"{v:7.1f}" for v in values))
