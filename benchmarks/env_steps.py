@@ -3,6 +3,7 @@
     python -m benchmarks.env_steps                           # every Brax task, both backends
     python -m benchmarks.env_steps --backends mujoco         # the C engine only (a minute)
     python -m benchmarks.env_steps --tasks hopper,ant --steps 4000 --repeats 5
+    python -m benchmarks.env_steps --tasks ant --solvers default,100/50   # what a solver costs
 
 Each (task, backend) is one jitted program, compiled as the driver compiles
 (`compile.compiler_options()`): a `lax.scan` of `--steps` steps of one env with uniform-random
@@ -11,7 +12,10 @@ actions, the env reset from a fresh random initial state when it falls (a `lax.c
 compiles (its time is reported, not counted), then `--repeats` timed calls; env steps/s =
 steps / median call time. No agent, no replay: at 1 env and one update per env step a SAC update
 costs about as much again or more (benchmarks/README.md), so this is an upper bound of a run's
-rate. A timing: run it on a quiet machine (the report records the load average).
+rate. `--solvers` times each task again under other MuJoCo solver options
+(`Config.solver_iterations`, `Config.solver_ls_iterations`), in the same run, so that their ratio
+means something on a machine whose speed drifts. A timing: run it on a quiet machine (the report
+records the load average).
 
 The JSON report goes to benchmarks/results/<YYYY-MM-DD>-env-steps.json (or `--out`), rewritten
 after each measurement, with the package versions and the machine's description
@@ -36,12 +40,28 @@ import jax
 import jax.numpy as jnp
 
 from arld_jax.compile import compiler_options
-from arld_jax.config import Config
+from arld_jax.config import SOLVER_FIELDS, Config, solver_settings
 from arld_jax.envs import Env, make_env
 from arld_jax.tasks import BRAX_TASKS
 from benchmarks.harness import RESULTS_DIR, block, log, machine_info, print_table, repo_path
 
 BACKENDS = ("mujoco", "mjx")
+SOLVER_FORMAT = "'default' (the task's own) or ITERATIONS/LS_ITERATIONS, for example 100/50"
+
+
+def parse_solvers(text: str) -> list[dict[str, int]]:
+    """`--solvers`: a comma list, each item 'default' or 'I/L' -> the `Config` solver fields it
+    sets ({} for 'default'). Whether a task and backend take them is `config.validate`'s job."""
+    solvers = []
+    for item in (t.strip() for t in text.split(",")):
+        if item == "default":
+            solvers.append({})
+            continue
+        parts = item.split("/")
+        if len(parts) != len(SOLVER_FIELDS) or not all(p.isdigit() and int(p) > 0 for p in parts):
+            raise ValueError(f"--solvers: got {item!r}; allowed: {SOLVER_FORMAT}")
+        solvers.append(dict(zip(SOLVER_FIELDS, map(int, parts), strict=True)))
+    return solvers
 
 
 def rollout(env: Env, steps: int) -> Callable[[jax.Array], tuple[jax.Array, jax.Array]]:
@@ -67,9 +87,9 @@ def rollout(env: Env, steps: int) -> Callable[[jax.Array], tuple[jax.Array, jax.
     return jax.jit(run, compiler_options=compiler_options())
 
 
-def measure(task: str, backend: str, steps: int, repeats: int) -> dict[str, Any]:
-    """Compile time and env steps/s of `rollout` for one task on one backend."""
-    env = make_env(Config(env_name=task, backend=backend))
+def measure(cfg: Config, steps: int, repeats: int) -> dict[str, Any]:
+    """Compile time and env steps/s of `rollout` for `cfg`'s task, backend and solver."""
+    env = make_env(cfg)
     program = rollout(env, steps)
     key = jax.random.key(0)
     start = time.perf_counter()
@@ -84,8 +104,9 @@ def measure(task: str, backend: str, steps: int, repeats: int) -> dict[str, Any]
         falls += int(fell)
     median = statistics.median(times)
     return {
-        "task": task,
-        "backend": backend,
+        "task": cfg.env_name,
+        "backend": cfg.backend,
+        "solver": solver_settings(cfg),
         "obs_dim": env.obs_dim,
         "action_dim": env.action_dim,
         "steps_per_call": steps,
@@ -108,11 +129,25 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--backends", default=",".join(BACKENDS), help="comma list of backends")
     parser.add_argument("--steps", type=int, default=2000, help="env steps per timed call")
     parser.add_argument("--repeats", type=int, default=3, help="timed calls per measurement")
+    parser.add_argument(
+        "--solvers",
+        default="default",
+        help=f"comma list of MuJoCo solver settings to time each task under, each {SOLVER_FORMAT}",
+    )
     parser.add_argument("--note", default="", help="a remark recorded in the report")
     parser.add_argument("--out", default=None, help="the JSON report (default: by date)")
     args = parser.parse_args(argv)
     tasks = [t for t in args.tasks.split(",") if t]
     backends = [b for b in args.backends.split(",") if b]
+    try:  # every setting is checked (`Config` validates itself) before anything compiles
+        cfgs = [
+            Config(env_name=task, backend=backend, **solver)
+            for backend in backends
+            for task in tasks
+            for solver in parse_solvers(args.solvers)
+        ]
+    except ValueError as e:
+        parser.error(str(e))
     date = datetime.date.today().isoformat()
     out = Path(args.out) if args.out else RESULTS_DIR / f"{date}-env-steps.json"
     info = machine_info(argparse.Namespace(quick=False, skip_mjx="mjx" not in backends))
@@ -126,20 +161,20 @@ def main(argv: list[str] | None = None) -> None:
         out.write_text(json.dumps(report, indent=2) + "\n")
 
     rows = []
-    for backend in backends:
-        for task in tasks:
-            log(f"{task} on {backend} ...")
-            r = measure(task, backend, args.steps, args.repeats)
-            report["results"].append(r)
-            save()
-            rows.append(
-                [task, backend, r["env_steps_per_s"], r["us_per_step"], r["compile_s"]]
-                + [r["falls_per_1000_steps"]]
-            )
-            log(f"  {r['env_steps_per_s']:,.0f} env steps/s, compiled in {r['compile_s']:.0f} s")
+    for cfg in cfgs:
+        solver = "/".join(map(str, solver_settings(cfg).values())) or "default"
+        log(f"{cfg.env_name} on {cfg.backend}, solver {solver} ...")
+        r = measure(cfg, args.steps, args.repeats)
+        report["results"].append(r)
+        save()
+        rows.append(
+            [cfg.env_name, cfg.backend, solver, r["env_steps_per_s"], r["us_per_step"]]
+            + [r["compile_s"], r["falls_per_1000_steps"]]
+        )
+        log(f"  {r['env_steps_per_s']:,.0f} env steps/s, compiled in {r['compile_s']:.0f} s")
     print_table(
         f"env steps/s at 1 env, random actions, {args.steps} scanned steps per call",
-        ["task", "backend", "env steps/s", "us/step", "compile s", "falls/1k steps"],
+        ["task", "backend", "solver", "env steps/s", "us/step", "compile s", "falls/1k steps"],
         rows,
     )
     log(f"\nreport: {repo_path(out)}")

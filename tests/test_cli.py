@@ -248,3 +248,24 @@ def test_task_presets_run_on_any_task():
     assert (arld.cfg.total_env_steps, arld.cfg.budget, arld.cfg.demo_steps) == (100_000, 2_500, 1)
     assert arld.cfg.uncertainty == "intrinsic"
     assert arld.cfg.backend == config.auto_backend(config.jax_platform())
+
+
+def test_env_steps_benchmark_reads_solver_settings_and_refuses_bad_ones(capsys, tmp_path):
+    from benchmarks import env_steps
+
+    assert env_steps.parse_solvers("default,100/50") == [
+        {},
+        {"solver_iterations": 100, "solver_ls_iterations": 50},
+    ]
+    for bad in ("100", "0/5", "100/50/1", "a/b", "", "100/-1"):
+        with pytest.raises(ValueError, match=f"got {bad!r}; allowed: 'default'"):
+            env_steps.parse_solvers(bad)
+    out = tmp_path / "report.json"
+    for argv, named in (
+        (["--tasks", "ant", "--solvers", "default,1/"], "--solvers: got '1/'"),
+        (["--tasks", "toy", "--solvers", "100/50"], "Config.solver_iterations = 100"),
+    ):
+        with pytest.raises(SystemExit) as exit_:  # refused before anything compiles or is written
+            env_steps.main([*argv, "--backends", "mujoco", "--out", str(out)])
+        assert exit_.value.code == 2 and named in capsys.readouterr().err
+        assert not out.exists()
