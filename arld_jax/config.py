@@ -114,6 +114,8 @@ def physics_line(cfg: Config, platform: str) -> str:
     )
     solver = solver_options(cfg)
     told = "".join(f", {v} {SOLVER_WORDS[k]}" for k, v in solver.items())
+    if cfg.contacts != "task":
+        told += f", {CONTACTS[cfg.contacts]}"
     return f"physics: {cfg.backend} ({PHYSICS[cfg.backend]}; {how}{told})"
 
 
@@ -135,6 +137,25 @@ def solver_settings(cfg: Config) -> dict[str, int]:
 def solver_options(cfg: Config) -> dict[str, int]:
     """The MuJoCo solver options `cfg` sets over the task's own (`opt.*` name -> value)."""
     return {SOLVER_FIELDS[f]: v for f, v in solver_settings(cfg).items()}
+
+
+CONTACTS: dict[str, str] = {
+    "task": "the task's own contacts",
+    "all": "every body geom touches the floor",
+}
+"""Each choice of `Config.contacts`, in words (the line a run starts with)."""
+
+
+PHYSICS_FIELDS: tuple[str, ...] = (*SOLVER_FIELDS, "contacts")
+"""The fields of `Config` that change a Brax task's MuJoCo model from Brax's."""
+
+
+def physics_settings(cfg: Config) -> dict[str, Any]:
+    """The `PHYSICS_FIELDS` of `cfg` set away from their defaults (field name -> value): what a
+    run's records (an exported expert, its evaluation) add to name the physics it ran, and what
+    `driver.expert_config` reads back."""
+    defaults = {f.name: f.default for f in dataclasses.fields(Config)}
+    return {f: getattr(cfg, f) for f in PHYSICS_FIELDS if getattr(cfg, f) != defaults[f]}
 
 
 ENVS: tuple[str, ...] = tuple(TASKS)
@@ -187,6 +208,16 @@ class Config(*AGENT_OPTIONS):
     """Physics of a Brax task on 'mjx' or 'mujoco': line-search iterations of the solver
     (`opt.ls_iterations`). 0 (the default) = the task's own: 50 from Brax's XMLs, 4 for Ant and
     Humanoid. MuJoCo's default (Gymnasium's v5 tasks) is 50."""
+    contacts: str = "task"
+    """Physics of a Brax task on 'mjx' or 'mujoco': which geoms collide with the floor. 'task' (the
+    default): Brax's, whose XMLs let only a few geoms touch the floor (Ant:
+    its four foot spheres, so its torso and legs pass through the floor; Hopper: its foot;
+    Walker2d: torso and feet; HalfCheetah: head, thighs and feet). 'all': every geom of the body
+    collides with the floor (not with the body's other geoms), as in Gymnasium's v5 XMLs, where an
+    ant resting on its torso or legs stands at the height of its torso's radius, not below it.
+    With 'all' the two backends are two physics where a capsule touches the floor: MuJoCo's C
+    engine lays the friction pyramid of a capsule's contact along the capsule, MJX along the world's
+    axes, which differs for Ant's diagonal legs (`arld_jax.physics`)."""
     num_envs: int = 1
     """Environments stepped in parallel per run (vmapped). The paper uses one."""
     env_max_batch: int = 0
@@ -472,6 +503,16 @@ def validate(cfg: Config) -> None:
                 f"0 with env_name {cfg.env_name!r} and backend {cfg.backend!r} (MuJoCo's solver "
                 f"options apply to a Brax task on {' or '.join(map(repr, MUJOCO_BACKENDS))})",
             )
+    checks.choice(cfg, "contacts", tuple(CONTACTS))
+    if cfg.contacts != "task" and (
+        TASKS[cfg.env_name].brax_name is None or cfg.backend not in MUJOCO_BACKENDS
+    ):
+        checks.fail(
+            "contacts",
+            cfg.contacts,
+            f"'task' with env_name {cfg.env_name!r} and backend {cfg.backend!r} (the choice of "
+            f"contacts applies to a Brax task on {' or '.join(map(repr, MUJOCO_BACKENDS))})",
+        )
     checks.choice(cfg, "strategy", STRATEGIES)
     checks.choice(cfg, "uncertainty", UNCERTAINTIES)
     checks.choice(cfg, "uncertainty_reduce", REDUCTIONS)

@@ -431,7 +431,7 @@ def export_expert(run_dir: Path, out: Path | None = None) -> Path:
     meta = {
         "env_name": cfg.env_name,
         "backend": cfg.backend,
-        **config_mod.solver_settings(cfg),
+        **config_mod.physics_settings(cfg),
         "obs_dim": env.obs_dim,
         "action_dim": env.action_dim,
         "hidden_sizes": list(cfg.hidden_sizes),
@@ -501,10 +501,11 @@ def write_group_results(out: Path, plots: bool, log) -> None:  # noqa: ANN001
 
 def expert_config(meta: dict[str, Any], backend: str | None = None) -> Config:
     """The Config an expert's episodes are played in: its task and the physics it was trained in
-    (backend, and MuJoCo's solver options where its run set them), or the backend `backend`."""
-    solver = {f: meta[f] for f in config_mod.SOLVER_FIELDS if f in meta}
+    (backend, and MuJoCo's solver options and contacts where its run set them), or the backend
+    `backend`."""
+    physics = {f: meta[f] for f in config_mod.PHYSICS_FIELDS if f in meta}
     return Config(
-        env_name=meta["env_name"], backend=backend or meta.get("backend", "mjx"), **solver
+        env_name=meta["env_name"], backend=backend or meta.get("backend", "mjx"), **physics
     )
 
 
@@ -539,7 +540,7 @@ def evaluate_expert(
         "path": str(path),
         "env_name": cfg.env_name,
         "backend": cfg.backend,
-        **config_mod.solver_settings(cfg),
+        **config_mod.physics_settings(cfg),
         "episodes": episodes,
         "seed": seed,
         "return_mean": mean,

@@ -25,7 +25,11 @@ same float32 rounding between steps, the same formulas (Brax's) in the same orde
 
 The two engines differ only in their arithmetic (float64 in C, float32 in MJX, and MJX's own
 solver and collision code); over one step from the same state they agree to float32 drift
-(tests/test_envs.py), over many steps they part as any two chaotic trajectories do. On CPU a C step
+(tests/test_envs.py), over many steps they part as any two chaotic trajectories do. One more
+difference appears with `Config.contacts` 'all' only: where a capsule touches the floor, the C
+engine's contact frame (and so its friction pyramid, Brax's tasks use pyramidal cones) follows the
+capsule, MJX's the world's axes. For a capsule along x (Hopper's, Walker2d's feet) the pyramids
+coincide; for Ant's diagonal legs one step from the same state can differ by 0.1 in a velocity. On CPU a C step
 with its callback costs tens of microseconds, an MJX step of one env about as much as a SAC update;
 on a GPU the callback is a device-host round trip per step, so there 'mjx' is the backend to use.
 """
@@ -58,13 +62,18 @@ if TYPE_CHECKING:
 # ---------------------------------------------------------------- building a Brax task
 
 
-def brax_task_env(spec: TaskSpec, backend: str, solver: dict[str, int] | None = None) -> Env:
+def brax_task_env(
+    spec: TaskSpec, backend: str, solver: dict[str, int] | None = None, contacts: str = "task"
+) -> Env:
     """The batched env of the Brax task `spec` on `backend` (see the module docstring), with
     MuJoCo's solver options `solver` (`opt.*` name -> value, e.g. {'iterations': 100}) over the
-    task's own: set on Brax's `sys`, which MJX steps and the C engine's model copies (`_c_model`)."""
+    task's own and the contacts `contacts` (`Config.contacts`): set on Brax's `sys`, which MJX
+    steps and the C engine's model copies (`_c_model`)."""
     brax_env = load_brax_env(spec.brax_name, "mjx" if backend == "mujoco" else backend)
     if solver:
         brax_env.sys = brax_env.sys.tree_replace({f"opt.{k}": v for k, v in solver.items()})
+    if contacts == "all":
+        brax_env.sys = all_geoms_touch_floor(brax_env.sys)
     # Brax's health rule is on exactly when its env says so; the loop needs it statically.
     brax_terminates = bool(getattr(brax_env, "_terminate_when_unhealthy", False))
     if brax_terminates != spec.can_terminate:
@@ -100,6 +109,20 @@ def brax_task_env(spec: TaskSpec, backend: str, solver: dict[str, int] | None = 
     )
 
 
+def all_geoms_touch_floor(sys: Any) -> Any:
+    """Brax's `sys` with every geom of the body able to collide with the floor (`Config.contacts`
+    'all'), as in Gymnasium's v5 XMLs: contype 1 on each geom not of the world body, whose
+    conaffinity stays 0 (Brax's XMLs), so a body geom meets the floor (conaffinity 1) and not
+    another body geom. MJX finds its collision pairs from these arrays when it traces a step; MuJoCo's
+    broad phase first asks each body's `body_contype`, the OR of its geoms', set here to match."""
+    body_of = np.asarray(sys.geom_bodyid)
+    contype = np.asarray(sys.geom_contype).copy()
+    contype[body_of != 0] = 1
+    body_contype = np.zeros_like(np.asarray(sys.body_contype))
+    np.bitwise_or.at(body_contype, body_of, contype)
+    return sys.tree_replace({"geom_contype": contype, "body_contype": body_contype})
+
+
 def load_brax_env(name: str, backend: str) -> Any:
     """Brax's env object `name` on `backend`, built without its import-time notices."""
     with without_third_party_noise():
@@ -129,7 +152,7 @@ def _c_model(sys: Any) -> Any:
     tasks' MJX options (Ant, Humanoid: Newton with 1 iteration and 4 line searches, Euler damping
     off) on `sys` only, so the MjModel it was built from still has the XML's. An option equal to
     the model's up to MJX's float32 keeps the model's float64 value (a timestep of 0.01, not
-    float32's 0.00999999977)."""
+    float32's 0.00999999977). Its geoms collide as `sys`'s do (`all_geoms_touch_floor`)."""
     model = copy.deepcopy(sys.mj_model)
     for f in dataclasses.fields(sys.opt):
         if f.name.startswith("_") or not hasattr(model.opt, f.name):
@@ -142,6 +165,16 @@ def _c_model(sys: Any) -> Any:
                 mine[:] = np.asarray(value)
             else:
                 setattr(model.opt, f.name, float(value))
+    collide = ("geom_contype", "geom_conaffinity", "body_contype", "body_conaffinity")
+    if any(not np.array_equal(getattr(model, n), np.asarray(getattr(sys, n))) for n in collide):
+        for name in collide:
+            getattr(model, name)[:] = np.asarray(getattr(sys, name))
+        # The model's compiled bounding-volume trees hold only the geoms that could collide when
+        # it was compiled; without its mid phase MuJoCo tests every geom pair the arrays allow,
+        # which finds the same contacts as a model compiled with these arrays.
+        import mujoco
+
+        model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_MIDPHASE
     return model
 
 

@@ -95,6 +95,9 @@ def test_auto_backend_is_resolved_when_the_config_is_built(monkeypatch, platform
         ", 100 solver iterations, 50 line searches)"
     )
     assert config.solver_options(cfg) == {} and "solver" not in config.physics_line(cfg, platform)
+    assert config.physics_line(cfg.replace(env_name="ant", contacts="all"), platform).endswith(
+        ", every body geom touches the floor)"
+    )
 
 
 @pytest.mark.parametrize(
@@ -108,10 +111,17 @@ def test_auto_backend_is_resolved_when_the_config_is_built(monkeypatch, platform
             "allowed 0 with env_name 'toy' and backend 'mujoco' \\(MuJoCo's solver options apply",
         ),
         (dict(backend="spring", solver_ls_iterations=10), "backend 'spring'"),
+        (dict(contacts="floor"), "contacts = 'floor' is invalid: allowed one of 'task', 'all'"),
+        (
+            dict(env_name="toy", contacts="all"),
+            "allowed 'task' with env_name 'toy' and backend 'mujoco' \\(the choice of contacts",
+        ),
+        (dict(backend="spring", contacts="all"), "contacts = 'all' is invalid.*backend 'spring'"),
     ],
 )
 def test_solver_options_are_checked(changes, message) -> None:
-    """A solver option is a whole number >= 0, and nonzero only where MuJoCo's solver runs."""
+    """A solver option is a whole number >= 0, and nonzero only where MuJoCo's solver runs; the
+    contacts are a named choice, other than the task's own only where MuJoCo runs."""
     base = dict(env_name="ant", backend="mujoco")
     with pytest.raises(ValueError, match=message):
         config.Config(**{**base, **changes})

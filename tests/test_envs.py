@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from arld_jax.config import ENVS, Config
+from arld_jax.config import CONTACTS, ENVS, Config
 from arld_jax.envs import limit_batch, make_env
 from arld_jax.physics import load_brax_env
 from arld_jax.tasks import BRAX_TASKS, REGISTRY
@@ -89,6 +89,77 @@ def test_solver_options_reach_both_engines():
 
     own, explicit, mujoco = (mjx_step(ant("mjx", *s)) for s in ((0, 0), (1, 4), (100, 50)))
     assert explicit == own and mujoco != own
+
+
+def _upside_down(state, height: float):
+    """The C-engine Ant state `state` turned on its back (half a turn about x), torso at `height`."""
+    host = state.inner.pipeline_state
+    q = host.q.at[:, 2].set(height).at[:, 3:7].set(jnp.array([0.0, 1.0, 0.0, 0.0]))
+    return state.replace(inner=state.inner.replace(pipeline_state=host.replace(q=q)))
+
+
+def test_all_contacts_reach_both_engines():
+    """`--contacts all` lets every body geom meet the floor on both backends. An Ant dropped on its
+    back: with Brax's contacts (its feet only) the torso sinks through the floor and the episode
+    ends by a fall in a few steps; with all contacts it comes to rest on its torso at the torso's
+    radius (0.25), which Brax's health rule (0.2 <= z <= 1.0) calls healthy, for 100 steps. MJX's
+    state holds a contact per geom pair that can touch: the 4 feet with Brax's contacts, and the
+    torso's and two per leg capsule more with all (29)."""
+    radius = float(load_brax_env("ant", "mjx").sys.geom_size[1, 0])  # the torso sphere's
+    heights, ended = {}, {}
+    for contacts in CONTACTS:
+        env = make_env(Config(env_name="ant", backend="mujoco", contacts=contacts))
+        state = _upside_down(jax.jit(env.reset, static_argnums=1)(jax.random.key(0), 2), 0.3)
+        step = jax.jit(env.step)
+        ended[contacts] = []
+        for _ in range(100):
+            state = step(state, jnp.zeros((2, env.action_dim)))
+            ended[contacts].append(np.asarray(state.terminated))
+        heights[contacts] = np.asarray(state.inner.pipeline_state.q[:, 2])
+    assert 0 < np.argmax(np.any(ended["task"], axis=1)) < 10 and heights["task"].max() < 0.0
+    assert not np.any(ended["all"])
+    np.testing.assert_allclose(heights["all"], radius, atol=2e-3)
+
+    def mjx_contacts(contacts):
+        mjx = make_env(Config(env_name="ant", backend="mjx", contacts=contacts))
+        state = jax.eval_shape(lambda k: mjx.reset(k, 2), jax.random.key(0))
+        return state.inner.pipeline_state.contact.dist.shape[-1]
+
+    assert (mjx_contacts("task"), mjx_contacts("all")) == (4, 29)
+
+
+def test_all_contacts_on_the_c_engine_are_those_of_a_model_compiled_with_them():
+    """The C engine's Ant with `--contacts all` (Brax's compiled model, its collision arrays
+    changed) finds the same contacts as Brax's ant.xml compiled with every body geom's contype 1:
+    all 17 body geoms on a floor 0.05 below the torso's centre, two per capsule (29). With the
+    model's mid phase on, whose trees were built for the feet alone, it would miss the capsules that
+    share a body with a foot."""
+    import os
+
+    import brax
+    import mujoco
+
+    from arld_jax.physics import _c_model, all_geoms_touch_floor
+
+    spec = mujoco.MjSpec.from_file(
+        os.path.join(os.path.dirname(brax.__file__), "envs/assets/ant.xml")
+    )
+    spec.compiler.fusestatic = True  # as Brax loads it: bodies without joints merged
+    for geom in spec.geoms:
+        if geom.parent.name != "world":
+            geom.contype = 1
+    compiled = spec.compile()
+    ours = _c_model(all_geoms_touch_floor(load_brax_env("ant", "mjx").sys))
+
+    def contacts(model):
+        data = mujoco.MjData(model)
+        data.qpos[:] = compiled.qpos0
+        data.qpos[2] = 0.05  # torso and legs (radius 0.08) below the floor's surface
+        mujoco.mj_forward(model, data)
+        return sorted((c.geom1, c.geom2, round(float(c.dist), 6)) for c in data.contact)
+
+    assert contacts(ours) == contacts(compiled)
+    assert len(contacts(ours)) == 29 and {g for _, g, _ in contacts(ours)} == set(range(1, 18))
 
 
 def test_a_wrong_task_name_is_refused_with_the_task_list():

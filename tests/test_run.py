@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from arld_jax import cli, compare, driver, plots, run, rundir, summary
+from arld_jax import config as config_mod
 from arld_jax.sweep import SHIPPED_EXPERT, Sweep, SweepGroup, expert_path_for, preset_tiny
 
 REPO = Path(__file__).resolve().parents[1]
@@ -488,14 +489,19 @@ def test_evaluate_expert_rolls_out_fresh_episodes(uninterrupted, tmp_path, capsy
 
 def test_an_expert_plays_in_the_physics_it_was_trained_in():
     """`evaluate_expert` rebuilds the expert's physics from its metadata: its backend, and
-    MuJoCo's solver options where its run set them (an exported expert records them only then);
-    `--backend` changes the engine, not the solver."""
+    MuJoCo's solver options and contacts where its run set them (an exported expert records them
+    only then); `--backend` changes the engine, not the solver or the contacts."""
     meta = {"env_name": "ant", "backend": "mujoco"}
     cfg = driver.expert_config(meta)
     assert (cfg.backend, cfg.solver_iterations, cfg.solver_ls_iterations) == ("mujoco", 0, 0)
-    solver = meta | {"solver_iterations": 100, "solver_ls_iterations": 50}
+    assert cfg.contacts == "task" and config_mod.physics_settings(cfg) == {}
+    solver = meta | {"solver_iterations": 100, "solver_ls_iterations": 50, "contacts": "all"}
     cfg = driver.expert_config(solver, backend="mjx")
     assert (cfg.backend, cfg.solver_iterations, cfg.solver_ls_iterations) == ("mjx", 100, 50)
+    assert cfg.contacts == "all"
+    assert config_mod.physics_settings(cfg) == {
+        k: v for k, v in solver.items() if k not in ("env_name", "backend")
+    }
     with pytest.raises(ValueError, match="solver_iterations = 100 is invalid"):
         driver.expert_config(solver, backend="spring")
 

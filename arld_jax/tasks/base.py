@@ -123,11 +123,14 @@ class TaskSpec:
         for these tasks only."""
         return self.upside_down is not never_upside_down
 
-    def make(self, backend: str, solver: dict[str, int] | None = None) -> Env:
+    def make(
+        self, backend: str, solver: dict[str, int] | None = None, contacts: str = "task"
+    ) -> Env:
         """The batched env on `backend` ('mjx', 'mujoco', or one of Brax's own pipelines), with
-        MuJoCo's solver options `solver` (`opt.*` name -> value) over the task's own."""
+        MuJoCo's solver options `solver` (`opt.*` name -> value) over the task's own and the
+        contacts `contacts` (`Config.contacts`)."""
         if self.make_pure is not None:
             return self.make_pure()
         from arld_jax import physics
 
-        return physics.brax_task_env(self, backend, solver)
+        return physics.brax_task_env(self, backend, solver, contacts)
