@@ -250,7 +250,7 @@ def test_task_presets_run_on_any_task():
     assert arld.cfg.backend == config.auto_backend(config.jax_platform())
 
 
-def test_env_steps_benchmark_reads_solver_settings_and_refuses_bad_ones(capsys, tmp_path):
+def test_env_steps_benchmark_reads_physics_settings_and_refuses_bad_ones(capsys, tmp_path):
     from benchmarks import env_steps
 
     assert env_steps.parse_solvers("default,100/50") == [
@@ -264,6 +264,7 @@ def test_env_steps_benchmark_reads_solver_settings_and_refuses_bad_ones(capsys, 
     for argv, named in (
         (["--tasks", "ant", "--solvers", "default,1/"], "--solvers: got '1/'"),
         (["--tasks", "toy", "--solvers", "100/50"], "Config.solver_iterations = 100"),
+        (["--tasks", "ant", "--contacts", "task,every"], "Config.contacts = 'every' is invalid"),
     ):
         with pytest.raises(SystemExit) as exit_:  # refused before anything compiles or is written
             env_steps.main([*argv, "--backends", "mujoco", "--out", str(out)])
