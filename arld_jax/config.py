@@ -154,8 +154,12 @@ def physics_settings(cfg: Config) -> dict[str, Any]:
     """The `PHYSICS_FIELDS` of `cfg` set away from their defaults (field name -> value): what a
     run's records (an exported expert, its evaluation) add to name the physics it ran, and what
     `driver.expert_config` reads back."""
-    defaults = {f.name: f.default for f in dataclasses.fields(Config)}
-    return {f: getattr(cfg, f) for f in PHYSICS_FIELDS if getattr(cfg, f) != defaults[f]}
+    return {f: getattr(cfg, f) for f in PHYSICS_FIELDS if getattr(cfg, f) != physics_default(f)}
+
+
+def physics_default(name: str) -> Any:
+    """The default of the `PHYSICS_FIELDS` field `name`: Brax's own model."""
+    return next(f.default for f in dataclasses.fields(Config) if f.name == name)
 
 
 ENVS: tuple[str, ...] = tuple(TASKS)
@@ -496,23 +500,17 @@ def validate(cfg: Config) -> None:
         value = getattr(cfg, name)
         if not checks.is_int(value) or value < 0:
             checks.fail(name, value, "an integer >= 1, or 0 (the task's own)")
-        if value and (TASKS[cfg.env_name].brax_name is None or cfg.backend not in MUJOCO_BACKENDS):
+    checks.choice(cfg, "contacts", tuple(CONTACTS))
+    runs_mujoco = TASKS[cfg.env_name].brax_name is not None and cfg.backend in MUJOCO_BACKENDS
+    for name, value in physics_settings(cfg).items():
+        if not runs_mujoco:
             checks.fail(
                 name,
                 value,
-                f"0 with env_name {cfg.env_name!r} and backend {cfg.backend!r} (MuJoCo's solver "
-                f"options apply to a Brax task on {' or '.join(map(repr, MUJOCO_BACKENDS))})",
+                f"{physics_default(name)!r} with env_name {cfg.env_name!r} and backend "
+                f"{cfg.backend!r} (MuJoCo's model options apply to a Brax task on "
+                f"{' or '.join(map(repr, MUJOCO_BACKENDS))})",
             )
-    checks.choice(cfg, "contacts", tuple(CONTACTS))
-    if cfg.contacts != "task" and (
-        TASKS[cfg.env_name].brax_name is None or cfg.backend not in MUJOCO_BACKENDS
-    ):
-        checks.fail(
-            "contacts",
-            cfg.contacts,
-            f"'task' with env_name {cfg.env_name!r} and backend {cfg.backend!r} (the choice of "
-            f"contacts applies to a Brax task on {' or '.join(map(repr, MUJOCO_BACKENDS))})",
-        )
     checks.choice(cfg, "strategy", STRATEGIES)
     checks.choice(cfg, "uncertainty", UNCERTAINTIES)
     checks.choice(cfg, "uncertainty_reduce", REDUCTIONS)

@@ -1,6 +1,7 @@
 """Batched environments by name: `make_env(cfg)` builds the task `cfg.env_name` (a module of
 `arld_jax.tasks`) on the physics `cfg.backend` (`arld_jax.physics`) with the solver options and
-contacts of `cfg` (`config.solver_options`, `Config.contacts`), its vmapped step chunked by `cfg.env_max_batch`.
+contacts of `cfg` (`config.solver_options`, `Config.contacts`), its vmapped step chunked by
+`cfg.env_max_batch`.
 
 The env interface (`Env`, `EnvState`) is `arld_jax.tasks.base`'s; the names the rest of the
 package imports from here are kept here. Time limits and resets are not the env's job: the loop

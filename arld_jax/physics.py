@@ -29,9 +29,10 @@ solver and collision code); over one step from the same state they agree to floa
 difference appears with `Config.contacts` 'all' only: where a capsule touches the floor, the C
 engine's contact frame (and so its friction pyramid, Brax's tasks use pyramidal cones) follows the
 capsule, MJX's the world's axes. For a capsule along x (Hopper's, Walker2d's feet) the pyramids
-coincide; for Ant's diagonal legs one step from the same state can differ by 0.1 in a velocity. On CPU a C step
-with its callback costs tens of microseconds, an MJX step of one env about as much as a SAC update;
-on a GPU the callback is a device-host round trip per step, so there 'mjx' is the backend to use.
+coincide; for Ant's diagonal legs one step from the same state can differ by 0.1 in a velocity. On
+CPU a C step with its callback costs tens of microseconds, an MJX step of one env about as much as a
+SAC update; on a GPU the callback is a device-host round trip per step, so there 'mjx' is the
+backend to use.
 """
 
 from __future__ import annotations
@@ -113,8 +114,9 @@ def all_geoms_touch_floor(sys: Any) -> Any:
     """Brax's `sys` with every geom of the body able to collide with the floor (`Config.contacts`
     'all'), as in Gymnasium's v5 XMLs: contype 1 on each geom not of the world body, whose
     conaffinity stays 0 (Brax's XMLs), so a body geom meets the floor (conaffinity 1) and not
-    another body geom. MJX finds its collision pairs from these arrays when it traces a step; MuJoCo's
-    broad phase first asks each body's `body_contype`, the OR of its geoms', set here to match."""
+    another body geom. MJX finds its collision pairs from these arrays when it traces a step;
+    MuJoCo's broad phase first asks each body's `body_contype`, the OR of its geoms', set here to
+    match."""
     body_of = np.asarray(sys.geom_bodyid)
     contype = np.asarray(sys.geom_contype).copy()
     contype[body_of != 0] = 1

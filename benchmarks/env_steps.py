@@ -16,8 +16,7 @@ costs about as much again or more (benchmarks/README.md), so this is an upper bo
 rate. `--solvers` times each task again under other MuJoCo solver options
 (`Config.solver_iterations`, `Config.solver_ls_iterations`) and `--contacts` under other contacts
 (`Config.contacts`), in the same run, so that their ratio means something on a machine whose speed
-drifts. A timing: run it on a quiet machine (the report
-records the load average).
+drifts. A timing: run it on a quiet machine (the report records the load average).
 
 The JSON report goes to benchmarks/results/<YYYY-MM-DD>-env-steps.json (or `--out`), rewritten
 after each measurement, with the package versions and the machine's description

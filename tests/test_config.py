@@ -108,13 +108,13 @@ def test_auto_backend_is_resolved_when_the_config_is_built(monkeypatch, platform
         (dict(solver_iterations=True), "solver_iterations = True is invalid"),
         (
             dict(env_name="toy", solver_iterations=10),
-            "allowed 0 with env_name 'toy' and backend 'mujoco' \\(MuJoCo's solver options apply",
+            "allowed 0 with env_name 'toy' and backend 'mujoco' \\(MuJoCo's model options apply",
         ),
         (dict(backend="spring", solver_ls_iterations=10), "backend 'spring'"),
         (dict(contacts="floor"), "contacts = 'floor' is invalid: allowed one of 'task', 'all'"),
         (
             dict(env_name="toy", contacts="all"),
-            "allowed 'task' with env_name 'toy' and backend 'mujoco' \\(the choice of contacts",
+            "allowed 'task' with env_name 'toy' and backend 'mujoco' \\(MuJoCo's model options",
         ),
         (dict(backend="spring", contacts="all"), "contacts = 'all' is invalid.*backend 'spring'"),
     ],

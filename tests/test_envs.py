@@ -92,7 +92,8 @@ def test_solver_options_reach_both_engines():
 
 
 def _upside_down(state, height: float):
-    """The C-engine Ant state `state` turned on its back (half a turn about x), torso at `height`."""
+    """The C-engine Ant state `state` turned on its back (half a turn about x), its torso at
+    `height`."""
     host = state.inner.pipeline_state
     q = host.q.at[:, 2].set(height).at[:, 3:7].set(jnp.array([0.0, 1.0, 0.0, 0.0]))
     return state.replace(inner=state.inner.replace(pipeline_state=host.replace(q=q)))
