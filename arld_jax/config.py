@@ -129,9 +129,9 @@ SOLVER_WORDS: dict[str, str] = {"iterations": "solver iterations", "ls_iteration
 
 
 def solver_settings(cfg: Config) -> dict[str, int]:
-    """The solver fields `cfg` sets (field name -> value); empty when every one is 0 (the task's
-    own, Brax's). What a run's records (an exported expert, its evaluation) add to name them."""
-    return {f: getattr(cfg, f) for f in SOLVER_FIELDS if getattr(cfg, f)}
+    """The solver fields `cfg` sets (field name -> value), the solver part of `physics_settings`;
+    empty when every one is 0 (the task's own, Brax's)."""
+    return {f: v for f, v in physics_settings(cfg).items() if f in SOLVER_FIELDS}
 
 
 def solver_options(cfg: Config) -> dict[str, int]:
@@ -219,9 +219,7 @@ class Config(*AGENT_OPTIONS):
     Walker2d: torso and feet; HalfCheetah: head, thighs and feet). 'all': every geom of the body
     collides with the floor (not with the body's other geoms), as in Gymnasium's v5 XMLs, where an
     ant resting on its torso or legs stands at the height of its torso's radius, not below it.
-    With 'all' the two backends are two physics where a capsule touches the floor: MuJoCo's C
-    engine lays the friction pyramid of a capsule's contact along the capsule, MJX along the world's
-    axes, which differs for Ant's diagonal legs (`arld_jax.physics`)."""
+    With 'all' the two backends part where a capsule touches the floor (`arld_jax.physics`)."""
     num_envs: int = 1
     """Environments stepped in parallel per run (vmapped). The paper uses one."""
     env_max_batch: int = 0
