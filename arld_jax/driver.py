@@ -211,6 +211,15 @@ def run_sweep(
         (out / CHECKPOINT_DIR).absolute(),
         options=ocp.CheckpointManagerOptions(max_to_keep=2, create=True),
     )
+    if resumed and mngr.latest_step() is None and (out / METRICS_FILE).exists():
+        # A clone of a committed run, or a run whose checkpoints were removed: training again
+        # from step 0 would overwrite its recorded periods at the first checkpoint.
+        periods = np.load(out / METRICS_FILE)["eval_return"].shape[1]
+        raise SystemExit(
+            f"error: {out} holds {periods} of {cfg.num_evals} evaluation periods in {METRICS_FILE} "
+            f"but no checkpoint to resume from ({CHECKPOINT_DIR}/ is empty). Nothing was "
+            f"overwritten: to train this run again from step 0, use another --out."
+        )
     t0 = time.time()
     log(config_mod.physics_line(cfg, config_mod.jax_platform()))
     state = init(keys, hps)

@@ -346,6 +346,18 @@ def test_other_config_in_same_directory_is_refused(uninterrupted):
     assert (full / "config.json").read_text() == before
 
 
+def test_recorded_periods_without_a_checkpoint_are_not_overwritten(uninterrupted, tmp_path):
+    """A run directory holding recorded periods but no checkpoint (a clone of a committed run:
+    checkpoints are not committed) is refused rather than trained again from step 0 over them."""
+    sweep, full = uninterrupted
+    for name in ("config.json", rundir.METRICS_FILE):
+        shutil.copy(full / name, tmp_path / name)
+    before = (tmp_path / rundir.METRICS_FILE).read_bytes()
+    with pytest.raises(SystemExit, match=r"holds 4 of 4 evaluation periods .* no checkpoint"):
+        driver.run_sweep(sweep, tmp_path, _quiet(chunk_periods=1))
+    assert (tmp_path / rundir.METRICS_FILE).read_bytes() == before
+
+
 def test_field_added_later_at_its_default_does_not_block_resume(tmp_path):
     """A directory written before a Config field existed resumes when the field is at its default
     (new fields keep the old behaviour there), and is refused when it is not."""
