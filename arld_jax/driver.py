@@ -218,7 +218,7 @@ def run_sweep(
         raise SystemExit(
             f"error: {out} holds {periods} of {cfg.num_evals} evaluation periods in {METRICS_FILE} "
             f"but no checkpoint to resume from ({CHECKPOINT_DIR}/ is empty). Nothing was "
-            f"overwritten: to train this run again from step 0, use another --out."
+            "overwritten: to train this run again from step 0, use another --out."
         )
     t0 = time.time()
     log(config_mod.physics_line(cfg, config_mod.jax_platform()))
