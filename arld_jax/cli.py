@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from arld_jax import config as config_mod
-from arld_jax.config import STRATEGIES, SWEEPABLE, Config
+from arld_jax.config import FIELDS, STRATEGIES, SWEEPABLE
 from arld_jax.driver import RunOptions
 from arld_jax.sweep import RELEVANT_FOR, Sweep, SweepGroup
 
@@ -69,10 +69,6 @@ def listing(title: str, entries: Mapping[str, str]) -> str:
 
 
 # ---------------------------------------------------------------- Config fields
-
-
-FIELDS = {f.name: f for f in dataclasses.fields(Config) if f.name != "notes"}
-"""The Config fields a command line sets (every one but the free-text `notes`)."""
 
 
 def usage(options: str, lists: bool) -> str:

@@ -159,7 +159,7 @@ def physics_settings(cfg: Config) -> dict[str, Any]:
 
 def physics_default(name: str) -> Any:
     """The default of the `PHYSICS_FIELDS` field `name`: Brax's own model."""
-    return next(f.default for f in dataclasses.fields(Config) if f.name == name)
+    return FIELDS[name].default
 
 
 ENVS: tuple[str, ...] = tuple(TASKS)
@@ -382,6 +382,13 @@ class Config(*AGENT_OPTIONS):
     def replace(self, **changes: Any) -> Config:
         """A copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
+
+
+FIELDS: dict[str, dataclasses.Field] = {
+    f.name: f for f in dataclasses.fields(Config) if f.name != "notes"
+}
+"""The Config fields that define a run, by name: every one but the free-text `notes`. A command
+line sets them and a run directory's identity holds them."""
 
 
 def field_docs() -> dict[str, str]:

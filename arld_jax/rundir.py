@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from arld_jax.config import Config
+from arld_jax.config import FIELDS
 
 CHECKPOINT_DIR = "checkpoints"
 METRICS_FILE = "metrics.npz"
@@ -48,7 +48,6 @@ WRITTEN_FILES: tuple[str, ...] = (
     SUMMARY_CSV, SUMMARY_MD, COMPARISON_CSV, COMPARISON_MD,
 )  # fmt: skip
 """The files a run directory's own writers (the sweep, `plot`) own: no --out may replace one."""
-_FIELDS = {f.name: f for f in dataclasses.fields(Config) if f.name != "notes"}
 
 
 def check_or_write_identity(out: Path, identity: dict[str, Any]) -> bool:
@@ -62,7 +61,7 @@ def check_or_write_identity(out: Path, identity: dict[str, Any]) -> bool:
         # A Config field added after the run was saved, at its default, is what the run had (new
         # fields keep the old behaviour at their default), so it does not block resuming.
         for f in set(new["config"]) - set(old["config"] or {}):
-            if f in _FIELDS and new["config"][f] == json.loads(json.dumps(_FIELDS[f].default)):
+            if f in FIELDS and new["config"][f] == json.loads(json.dumps(FIELDS[f].default)):
                 del new["config"][f]
         if old != new:
             diffs = []
