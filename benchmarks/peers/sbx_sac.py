@@ -13,16 +13,28 @@ entropy coefficient tuned automatically), one gradient step per env step, 1 env.
 `evaluate_policy`); the JSON holds those returns with the versions and the model's
 hyperparameters. It is rewritten after every evaluation (`"complete": false` until the last
 step), so a run cut short keeps the evaluations it made; sbx cannot resume it.
+
+The task's model can be another MJCF under Gymnasium's reward and health rule, to tell a learner's
+part from the model's. Brax's Ant as arld_jax steps it (Brax's XML and the solver options
+brax/envs/ant.py sets, its initial pose, its 27 observations, no contact cost):
+
+    ../venv-sbx/bin/python benchmarks/peers/sbx_sac.py --env Ant-v5 --seed 0 \
+        --xml-file "$(python -c 'import importlib.util as u; print(u.find_spec("brax").submodule_search_locations[0])')/envs/assets/ant.xml" \
+        --env-kwarg include_cfrc_ext_in_observation=false --env-kwarg contact_cost_weight=0 \
+        --model-opt iterations=1 --model-opt ls_iterations=4 --model-opt disable=eulerdamp \
+        --init-qpos-from init_qpos --out experiments/sac_300k_peers/sbx-Ant-v5-brax-model-seed0.json
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import importlib.metadata
 import json
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 
 def versions() -> dict[str, str | None]:
@@ -35,18 +47,126 @@ def versions() -> dict[str, str | None]:
     return out
 
 
+def name_values(p: argparse.ArgumentParser, flag: str, items: list[str]) -> dict[str, str]:
+    """`NAME=VALUE` items of a repeated `flag` as a dict, or a parser error naming the bad one."""
+    out: dict[str, str] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            p.error(f"{flag} takes NAME=VALUE, got {item!r}")
+        out[name] = value
+    return out
+
+
+def set_model(
+    p: argparse.ArgumentParser, env: Any, opts: dict[str, str], init_from: str | None
+) -> None:
+    """Set MuJoCo options `opts` on `env`'s model (`disable` takes a `mjtDisableBit` name, lower
+    case without `mjDSBL_`) and, with `init_from`, reset around the model's custom numeric of that
+    name instead of its qpos0 (Brax reads its XMLs' `init_qpos` the same way)."""
+    import mujoco
+    import numpy as np
+
+    u = env.unwrapped
+    for name, value in opts.items():
+        if name == "disable":
+            bit = getattr(mujoco.mjtDisableBit, "mjDSBL_" + value.upper(), None)
+            if bit is None:
+                allowed = [b.name[len("mjDSBL_") :].lower() for b in mujoco.mjtDisableBit]
+                p.error(f"--model-opt disable={value}: allowed {allowed}")
+            u.model.opt.disableflags |= int(bit)
+        elif isinstance(getattr(u.model.opt, name, None), int | float):
+            setattr(u.model.opt, name, type(getattr(u.model.opt, name))(float(value)))
+        else:
+            p.error(f"--model-opt {name}={value}: {name!r} is not a number of MuJoCo's opt")
+    if init_from is not None:
+        try:
+            init = np.array(u.model.numeric(init_from).data, dtype=np.float64)
+        except KeyError:
+            p.error(f"--init-qpos-from {init_from}: the model has no custom numeric of that name")
+        if init.shape != u.init_qpos.shape:
+            p.error(
+                f"--init-qpos-from {init_from}: {init.size} numbers, the model's nq is {u.model.nq}"
+            )
+        u.init_qpos = init
+
+
+def add_model_args(p: argparse.ArgumentParser) -> None:
+    """The flags that say which task and model Gymnasium's env runs (`env_maker` reads them)."""
+    p.add_argument("--env", required=True, help="a Gymnasium task id, e.g. Hopper-v5")
+    p.add_argument("--xml-file", help="the task's MJCF in place of Gymnasium's (its `xml_file`)")
+    p.add_argument(
+        "--env-kwarg",
+        action="append",
+        default=[],
+        metavar="NAME=JSON",
+        help="a keyword of gym.make, its value as JSON (e.g. contact_cost_weight=0); repeatable",
+    )
+    p.add_argument(
+        "--model-opt",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="set the model's opt.NAME (e.g. iterations=1), or disable=FLAG; repeatable",
+    )
+    p.add_argument(
+        "--init-qpos-from",
+        metavar="NUMERIC",
+        help="reset around the model's custom numeric of this name (Brax's XMLs: init_qpos)",
+    )
+
+
+def env_maker(
+    p: argparse.ArgumentParser, args: argparse.Namespace
+) -> tuple[Callable[[], Any], dict[str, Any]]:
+    """A function that makes the env `add_model_args`' flags name, and the record of its model
+    for the JSON; a bad flag is a parser error before anything is built."""
+    env_kwargs: dict[str, Any] = {}
+    for name, value in name_values(p, "--env-kwarg", args.env_kwarg).items():
+        try:
+            env_kwargs[name] = json.loads(value)
+        except json.JSONDecodeError:
+            p.error(f"--env-kwarg {name}={value}: the value is not JSON (a string needs quotes)")
+    model_opt = name_values(p, "--model-opt", args.model_opt)
+    if args.xml_file is not None:
+        if not Path(args.xml_file).is_file():
+            p.error(f"--xml-file {args.xml_file}: no such file")
+        env_kwargs["xml_file"] = str(Path(args.xml_file).resolve())
+
+    import gymnasium as gym
+
+    def make() -> gym.Env:
+        env = gym.make(args.env, **env_kwargs)
+        set_model(p, env, model_opt, args.init_qpos_from)
+        return env
+
+    model_record = {
+        "xml_file": Path(args.xml_file).name if args.xml_file else None,
+        "xml_sha256": (
+            hashlib.sha256(Path(args.xml_file).read_bytes()).hexdigest() if args.xml_file else None
+        ),
+        "env_kwargs": {k: v for k, v in env_kwargs.items() if k != "xml_file"},
+        "model_opt": model_opt,
+        "init_qpos_from": args.init_qpos_from,
+        "obs_dim": int(make().observation_space.shape[0]),
+    }
+    return make, model_record
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--env", required=True, help="a Gymnasium task id, e.g. Hopper-v5")
     p.add_argument("--steps", type=int, default=300_000, help="env steps (default 300000)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--eval-every", type=int, default=10_000)
     p.add_argument("--eval-episodes", type=int, default=10)
     p.add_argument("--out", required=True, help="the JSON file to write")
+    add_model_args(p)
     args = p.parse_args(argv)
     for name in ("steps", "eval_every", "eval_episodes"):
         if getattr(args, name) < 1:
             p.error(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+
+    make, model_record = env_maker(p, args)
 
     import gymnasium as gym
     from sbx import SAC
@@ -84,7 +204,8 @@ def main(argv: list[str] | None = None) -> None:
 
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    env, eval_env = gym.make(args.env), Monitor(gym.make(args.env))
+
+    env, eval_env = make(), Monitor(make())
     eval_env.reset(seed=10_000 + args.seed)  # fresh episodes, not the training env's
     model = SAC("MlpPolicy", env, seed=args.seed, verbose=0)
     hyper = {
@@ -115,6 +236,7 @@ def main(argv: list[str] | None = None) -> None:
             "seed": args.seed,
             "steps": args.steps,
             "complete": complete,
+            "model": model_record,
             "eval_every": args.eval_every,
             "eval_episodes": args.eval_episodes,
             "eval_env_steps": evaluate.steps,
