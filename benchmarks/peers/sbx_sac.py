@@ -54,6 +54,8 @@ def name_values(p: argparse.ArgumentParser, flag: str, items: list[str]) -> dict
         name, sep, value = item.partition("=")
         if not sep or not name:
             p.error(f"{flag} takes NAME=VALUE, got {item!r}")
+        if name in out:
+            p.error(f"{flag} {name} given twice ({out[name]!r} and {value!r}): give it once")
         out[name] = value
     return out
 
@@ -61,22 +63,28 @@ def name_values(p: argparse.ArgumentParser, flag: str, items: list[str]) -> dict
 def set_model(
     p: argparse.ArgumentParser, env: Any, opts: dict[str, str], init_from: str | None
 ) -> None:
-    """Set MuJoCo options `opts` on `env`'s model (`disable` takes a `mjtDisableBit` name, lower
-    case without `mjDSBL_`) and, with `init_from`, reset around the model's custom numeric of that
-    name instead of its qpos0 (Brax reads its XMLs' `init_qpos` the same way)."""
+    """Set MuJoCo options `opts` on `env`'s model (`disable` takes `mjtDisableBit` names, lower
+    case without `mjDSBL_`, comma-separated) and, with `init_from`, reset around the model's
+    custom numeric of that name instead of its qpos0 (Brax reads its XMLs' `init_qpos` so)."""
     import mujoco
     import numpy as np
 
     u = env.unwrapped
     for name, value in opts.items():
         if name == "disable":
-            bit = getattr(mujoco.mjtDisableBit, "mjDSBL_" + value.upper(), None)
-            if bit is None:
-                allowed = [b.name[len("mjDSBL_") :].lower() for b in mujoco.mjtDisableBit]
-                p.error(f"--model-opt disable={value}: allowed {allowed}")
-            u.model.opt.disableflags |= int(bit)
+            for flag in value.split(","):
+                bit = getattr(mujoco.mjtDisableBit, "mjDSBL_" + flag.upper(), None)
+                if bit is None:
+                    bits = dir(mujoco.mjtDisableBit)
+                    allowed = [b[len("mjDSBL_") :].lower() for b in bits if b.startswith("mjDSBL_")]
+                    p.error(f"--model-opt disable={value}: {flag!r} is none of {allowed}")
+                u.model.opt.disableflags |= int(bit)
         elif isinstance(getattr(u.model.opt, name, None), int | float):
-            setattr(u.model.opt, name, type(getattr(u.model.opt, name))(float(value)))
+            kind = type(getattr(u.model.opt, name))
+            try:
+                setattr(u.model.opt, name, kind(float(value)))
+            except ValueError:
+                p.error(f"--model-opt {name}={value}: {name!r} takes a number")
         else:
             p.error(f"--model-opt {name}={value}: {name!r} is not a number of MuJoCo's opt")
     if init_from is not None:
@@ -136,9 +144,14 @@ def env_maker(
     import gymnasium as gym
 
     def make() -> gym.Env:
-        env = gym.make(args.env, **env_kwargs)
+        try:
+            env = gym.make(args.env, **env_kwargs)
+        except TypeError as e:  # a keyword the task does not take
+            p.error(f"--env-kwarg: {args.env} refused it: {e}")
         set_model(p, env, model_opt, args.init_qpos_from)
         return env
+
+    obs_dim = int(make().observation_space.shape[0])  # every flag checked before training
 
     model_record = {
         "xml_file": Path(args.xml_file).name if args.xml_file else None,
@@ -148,7 +161,7 @@ def env_maker(
         "env_kwargs": {k: v for k, v in env_kwargs.items() if k != "xml_file"},
         "model_opt": model_opt,
         "init_qpos_from": args.init_qpos_from,
-        "obs_dim": int(make().observation_space.shape[0]),
+        "obs_dim": obs_dim,
     }
     return make, model_record
 
