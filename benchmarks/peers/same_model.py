@@ -27,7 +27,10 @@ def dump(task: str, out: str, episodes: int, max_steps: int, seed: int) -> None:
 
     from arld_jax.config import Config
     from arld_jax.envs import make_env
+    from arld_jax.tasks import BRAX_TASKS
 
+    if task not in BRAX_TASKS:
+        sys.exit(f"--task {task}: not a Brax task; allowed {sorted(BRAX_TASKS)}")
     env = make_env(Config(env_name=task, backend="mujoco"))
     reset, step = jax.jit(env.reset, static_argnums=1), jax.jit(env.step)
     rng = np.random.default_rng(seed)
