@@ -191,7 +191,8 @@ class Config(*AGENT_OPTIONS):
     # ---- environment (static) ----
     env_name: str = "halfcheetah"
     """The task, one of `ENVS` (a module each in `arld_jax.tasks`): Brax's 'halfcheetah' (never
-    falls), 'hopper', 'walker2d', 'ant', 'humanoid' (a fall ends the episode), or the cheap
+    falls), 'hopper', 'walker2d', 'ant', 'ant_contact' (Ant observing and paying for its contact
+    forces, as Gymnasium's Ant-v5), 'humanoid' (a fall ends the episode), or the cheap
     pure-JAX stand-ins of the tests: 'toy' (never ends early) and 'toy_fall' (ends when the action
     strays far from the target)."""
     backend: str = "auto"

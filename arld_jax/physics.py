@@ -84,22 +84,29 @@ def brax_task_env(
         )
     if backend == "mujoco":
         # Brax keeps the frames per step in a private attribute (brax 0.14.2, pinned).
-        host = HostPhysics(brax_env.sys, int(brax_env._n_frames), spec.reads_velocities)
+        host = HostPhysics(
+            brax_env.sys, int(brax_env._n_frames), spec.reads_velocities, spec.contact_forces
+        )
         # Instance attributes shadow PipelineEnv's methods: Brax's reset and step call these.
         brax_env.pipeline_init = host.pipeline_init
         brax_env.pipeline_step = host.pipeline_step
+    elif spec.contact_forces:
+        with_contact_forces(brax_env, backend)
+    terms = contact_terms(brax_env) if spec.contact_forces else None
 
-    def wrap(s: Any) -> EnvState:
+    def wrap(s: Any, stepped: bool) -> EnvState:
+        if terms is not None:
+            s = jax.vmap(lambda one: terms(one, stepped))(s)
         return EnvState(inner=s, obs=s.obs, reward=s.reward, terminated=s.done)
 
     def reset(key: PRNGKey, n: int) -> EnvState:
-        return wrap(jax.vmap(brax_env.reset)(jax.random.split(key, n)))
+        return wrap(jax.vmap(brax_env.reset)(jax.random.split(key, n)), stepped=False)
 
     def step(state: EnvState, action: jax.Array) -> EnvState:
-        return wrap(jax.vmap(brax_env.step)(state.inner, action))
+        return wrap(jax.vmap(brax_env.step)(state.inner, action), stepped=True)
 
     # Traced, not run: Brax's `observation_size` runs a whole reset eagerly (minutes for MJX).
-    obs_shape = jax.eval_shape(brax_env.reset, jax.random.key(0)).obs.shape
+    obs_shape = jax.eval_shape(lambda k: reset(k, 1), jax.random.key(0)).obs.shape
     return Env(
         reset=reset,
         step=step,
@@ -108,6 +115,38 @@ def brax_task_env(
         upside_down=spec.upside_down,
         can_terminate=spec.can_terminate,
     )
+
+
+def with_contact_forces(brax_env: Any, backend: str) -> None:
+    """Brax's MJX pipeline made to fill its state's `cfrc_ext` after each init and step (MJX's
+    step leaves it at 0, as MuJoCo's does: `rne_postconstraint`, MuJoCo's `mj_rnePostConstraint`,
+    computes it from the last forward pass's contact forces). Brax's own pipelines have no such
+    field."""
+    if backend != "mjx":
+        raise ValueError(
+            f"a task with contact forces runs on backend 'mjx' or 'mujoco', not {backend!r}"
+        )
+    from mujoco import mjx
+
+    init, step = brax_env.pipeline_init, brax_env.pipeline_step  # PipelineEnv's, bound
+    brax_env.pipeline_init = lambda *a, **k: mjx.rne_postconstraint(brax_env.sys, init(*a, **k))
+    brax_env.pipeline_step = lambda s, a: mjx.rne_postconstraint(brax_env.sys, step(s, a))
+
+
+def contact_terms(brax_env: Any) -> Callable[[Any, bool], Any]:
+    """(Brax's State of one env, whether it was stepped) -> that state with its contact terms
+    (`TaskSpec.contact_forces`): the observation gains the clipped cfrc_ext of every body but the
+    world, a step's reward loses the task's contact cost. Weight and range are Brax's env's own
+    (brax/envs/ant.py: 5e-4 and [-1, 1], as Gymnasium's Ant-v5)."""
+    weight = float(brax_env._contact_cost_weight)
+    low, high = (float(v) for v in brax_env._contact_force_range)
+
+    def add(s: Any, stepped: bool) -> Any:
+        forces = jnp.clip(s.pipeline_state.cfrc_ext[1:], low, high)
+        cost = weight * jnp.sum(jnp.square(forces)) if stepped else 0.0
+        return s.replace(obs=jnp.concatenate([s.obs, forces.ravel()]), reward=s.reward - cost)
+
+    return add
 
 
 def all_geoms_touch_floor(sys: Any) -> Any:
@@ -147,6 +186,7 @@ class HostPhysicsState:
     qacc_warmstart: jax.Array  # [nv]: the solver's warm start, part of mj_step's state
     x: Any  # brax.base.Transform: pos [nbody - 1, 3], rot [nbody - 1, 4] (world body left out)
     xd: Any = None  # brax.base.Motion [nbody - 1] where the task reads it (`TaskSpec`)
+    cfrc_ext: Any = None  # [nbody, 6], the world's row 0, where the task reads it (`TaskSpec`)
 
 
 def _c_model(sys: Any) -> Any:
@@ -189,13 +229,14 @@ class HostPhysics:
     `jax.pure_callback` requires (and a checkpoint resumes bit-identically). Each direction is
     packed into one array, because each argument of a host callback costs tens of microseconds."""
 
-    def __init__(self, sys: Any, n_frames: int, velocities: bool) -> None:
+    def __init__(self, sys: Any, n_frames: int, velocities: bool, forces: bool = False) -> None:
         self.sys, self.model, self.n_frames = sys, _c_model(sys), n_frames
-        self.velocities = velocities
+        self.velocities, self.forces = velocities, forces
         m = self.model
         self.bodies = m.nbody - 1  # Brax leaves out the world body
-        # Per body: pos 3, quat 4; with velocities also cvel 6 and its root subtree's com 3.
-        self.frame_size = self.bodies * (16 if velocities else 7)
+        # Per body: pos 3, quat 4; with velocities also cvel 6 and its root subtree's com 3; with
+        # forces (after those) its cfrc_ext 6.
+        self.frame_size = self.bodies * (7 + 9 * velocities + 6 * forces)
         self._spare: queue.SimpleQueue = queue.SimpleQueue()  # scratch MjData, one per caller
 
     @contextlib.contextmanager
@@ -221,7 +262,12 @@ class HostPhysics:
         out[3 * b : 7 * b] = d.xquat[1:].ravel()
         if self.velocities:
             out[7 * b : 13 * b] = d.cvel[1:].ravel()
-            out[13 * b :] = d.subtree_com[m.body_rootid[1:]].ravel()
+            out[13 * b : 16 * b] = d.subtree_com[m.body_rootid[1:]].ravel()
+        if self.forces:
+            import mujoco
+
+            mujoco.mj_rnePostConstraint(m, d)  # fills cfrc_ext (mj_step does not)
+            out[len(out) - 6 * b :] = d.cfrc_ext[1:].ravel()
 
     def host_step(self, packed: Any) -> np.ndarray:
         """[..., nq + nv + nv + nu] = (qpos, qvel, warm start, ctrl) -> [..., nq + nv + nv +
@@ -246,7 +292,8 @@ class HostPhysics:
         return out.reshape(*lead, w + self.frame_size)
 
     def host_frames(self, packed: Any) -> np.ndarray:
-        """[..., nq + nv] = (qpos, qvel) -> [..., frame_size]: the frames at that state."""
+        """[..., nq + nv] = (qpos, qvel) -> [..., frame_size]: the frames at that state (its contact
+        forces need the whole forward pass, with a zero warm start as MJX's `make_data`)."""
         import mujoco
 
         m = self.model
@@ -256,8 +303,12 @@ class HostPhysics:
         with self._data() as d:
             for i, row in enumerate(flat):
                 d.qpos[:], d.qvel[:] = row[: m.nq], row[m.nq :]
-                mujoco.mj_kinematics(m, d)
-                if self.velocities:
+                if self.forces:
+                    d.qacc_warmstart[:], d.ctrl[:] = 0.0, 0.0
+                    mujoco.mj_forward(m, d)
+                else:
+                    mujoco.mj_kinematics(m, d)
+                if self.velocities and not self.forces:
                     mujoco.mj_comPos(m, d)
                     mujoco.mj_comVel(m, d)
                 self._frames(d, out[i])
@@ -271,12 +322,15 @@ class HostPhysics:
         b = self.bodies
         pos = frames[: 3 * b].reshape(b, 3)
         x = Transform(pos=pos, rot=frames[3 * b : 7 * b].reshape(b, 4))
-        xd = None
+        xd = cfrc_ext = None
         if self.velocities:
             cvel = frames[7 * b : 13 * b].reshape(b, 6)
-            offset = Transform.create(pos=pos - frames[13 * b :].reshape(b, 3))
+            offset = Transform.create(pos=pos - frames[13 * b : 16 * b].reshape(b, 3))
             xd = offset.vmap().do(Motion(vel=cvel[:, 3:], ang=cvel[:, :3]))
-        return HostPhysicsState(q=q, qd=qd, qacc_warmstart=warm, x=x, xd=xd)
+        if self.forces:
+            bodies = frames[frames.shape[-1] - 6 * b :].reshape(b, 6)
+            cfrc_ext = jnp.concatenate([jnp.zeros((1, 6), bodies.dtype), bodies])
+        return HostPhysicsState(q=q, qd=qd, qacc_warmstart=warm, x=x, xd=xd, cfrc_ext=cfrc_ext)
 
     def pipeline_init(self, q: jax.Array, qd: jax.Array, act: Any = None, ctrl: Any = None) -> Any:
         """Brax's `PipelineEnv.pipeline_init` (one env): the state at (q, qd), warm start 0 (MJX's

@@ -26,6 +26,7 @@ UNHEALTHY: dict[str, tuple[int, float]] = {
     "hopper": (2, 0.5),  # pitched forward past 0.2 rad
     "walker2d": (2, 1.5),  # pitched past 1 rad
     "ant": (2, 1.5),  # torso above 1.0 (in the air)
+    "ant_contact": (2, 1.5),  # Ant's body and health rule
     "humanoid": (2, 2.5),  # torso above 2.0 (in the air)
     "halfcheetah": (2, np.pi),  # on its back, which never ends an episode
 }
@@ -203,9 +204,10 @@ def _as_mjx_state(mjx_env, c_state):
 @pytest.mark.parametrize("task", BRAX_TASKS)
 def test_both_backends_give_the_same_step(task):
     """From the same state (reached by a few random C steps: bodies moving, feet on the ground)
-    and the same action, one step of each backend gives the same observation and reward to float32
-    drift and the same termination: 0 on that healthy state, and on a constructed unhealthy one
-    (`UNHEALTHY`) 1 for a task that can fall, 0 for HalfCheetah. Compiles one MJX step."""
+    and the same action, one step of each backend gives the same observation (contact forces too,
+    where the task observes them) and reward to float32 drift and the same termination: 0 on that
+    healthy state, and on a constructed unhealthy one (`UNHEALTHY`) 1 for a task that can fall, 0
+    for HalfCheetah. Compiles one MJX step."""
     c = make_env(Config(env_name=task, backend="mujoco"))
     mjx = make_env(Config(env_name=task, backend="mjx"))
     assert (c.obs_dim, c.action_dim, c.can_terminate) == (
@@ -231,6 +233,9 @@ def test_both_backends_give_the_same_step(task):
         np.testing.assert_array_equal(sc.terminated, [expected] * 2, err_msg=name)
         np.testing.assert_array_equal(sm.terminated, [expected] * 2, err_msg=name)
         assert float(jnp.max(jnp.abs(sc.obs - state.obs))) > 1e-3  # it moved
+        if REGISTRY[task].contact_forces and name == "healthy":  # a foot on the floor
+            forces = sm.obs[:, -6 * host.x.pos.shape[1] :]
+            assert float(jnp.sum(jnp.abs(forces))) > 1.0, name
     assert float(jnp.max(jnp.abs(sc.obs - sm.obs))) > 0  # two engines, not one
 
 
@@ -252,6 +257,59 @@ def test_c_engine_reward_is_brax_formula(task):
     expected = velocity + alive - ctrl * jnp.sum(action**2, axis=-1)
     np.testing.assert_allclose(nxt.reward, expected, rtol=1e-4, atol=1e-4)
     assert float(jnp.max(jnp.abs(velocity))) > 0.01  # the torso moved: the velocity term was tested
+
+
+def test_ant_contact_is_ant_with_mujocos_contact_forces():
+    """`ant_contact` on the C engine, against MuJoCo itself and Brax's Ant: from the same state and
+    action, its observation is Ant's 27 then cfrc_ext[1:] clipped to [-1, 1] as MuJoCo computes it
+    after the step (`mj_step` of 5 frames, then `mj_rnePostConstraint`, as Gymnasium's Ant-v5 does),
+    and its reward is Ant's less 5e-4 x their sum of squares; a reset observes the forces at the
+    initial state (`mj_forward`), and its reward stays 0."""
+    import mujoco
+
+    from arld_jax.physics import _c_model
+
+    ant = make_env(Config(env_name="ant", backend="mujoco"))
+    contact = make_env(Config(env_name="ant_contact", backend="mujoco"))
+    model = _c_model(load_brax_env("ant", "mjx").sys)
+    bodies = model.nbody - 1
+    assert contact.obs_dim == ant.obs_dim + 6 * bodies == 27 + 54
+    state = _c_state_after(contact, jax.random.key(6), steps=4, n=8)
+    action = jnp.linspace(-1.0, 1.0, 8 * 8).reshape(8, 8)
+    got = jax.jit(contact.step)(state, action)
+    host = state.inner.pipeline_state
+    ant_state = _c_state_after(ant, jax.random.key(6), steps=4, n=8)
+    np.testing.assert_array_equal(ant_state.inner.pipeline_state.q, host.q)  # the same physics
+    plain = jax.jit(ant.step)(ant_state, action)
+    data = mujoco.MjData(model)
+    want = []
+    for e in range(8):
+        data.qpos[:], data.qvel[:] = host.q[e], host.qd[e]
+        data.qacc_warmstart[:], data.ctrl[:] = host.qacc_warmstart[e], action[e]
+        mujoco.mj_step(model, data, nstep=5)
+        mujoco.mj_rnePostConstraint(model, data)
+        want.append(np.clip(data.cfrc_ext[1:], -1.0, 1.0).ravel())
+    want = np.stack(want)
+    np.testing.assert_array_equal(got.obs[:, :27], plain.obs)
+    np.testing.assert_allclose(got.obs[:, 27:], want, atol=1e-6)
+    cost = 5e-4 * np.sum(want**2, axis=-1)
+    np.testing.assert_allclose(got.reward, plain.reward - cost, atol=1e-6)
+    # Some envs touch the floor after the step (Ant bounces on random actions), some forces clipped.
+    assert (cost > 1e-3).sum() >= 2 and np.abs(want).max() == 1.0
+    np.testing.assert_array_equal(got.terminated, plain.terminated)
+    fresh = contact.reset(jax.random.key(7), 2)
+    for e in range(2):
+        data.qpos[:], data.qvel[:] = (
+            fresh.inner.pipeline_state.q[e],
+            fresh.inner.pipeline_state.qd[e],
+        )
+        data.qacc_warmstart[:], data.ctrl[:] = 0.0, 0.0
+        mujoco.mj_forward(model, data)
+        mujoco.mj_rnePostConstraint(model, data)
+        np.testing.assert_allclose(
+            fresh.obs[e, 27:], np.clip(data.cfrc_ext[1:], -1, 1).ravel(), atol=1e-6
+        )
+    np.testing.assert_array_equal(fresh.reward, 0.0)
 
 
 # ---------------------------------------------------------------- batching

@@ -565,7 +565,7 @@ def test_cloned_expert_reproduces_the_recorded_actions(tmp_path: Path) -> None:
     assert np.abs(actions).mean() > 0.3
 
 
-@pytest.mark.parametrize("task", ["hopper", "walker2d", "ant", "humanoid"])
+@pytest.mark.parametrize("task", ["hopper", "walker2d", "ant", "ant_contact", "humanoid"])
 def test_every_brax_task_is_drawn_at_its_observed_pose(task) -> None:
     """A state of the task (a C-engine reset, so Brax's own observation of it): the pose the page
     draws is the state's qpos with the root's unobserved x (and y) at 0, the bodies are the
@@ -583,7 +583,7 @@ def test_every_brax_task_is_drawn_at_its_observed_pose(task) -> None:
     state = make_env(Config(env_name=task, backend="mujoco")).reset(jax.random.key(0), 1)
     obs, qpos = np.asarray(state.obs[0]), np.asarray(state.inner.pipeline_state.q[0], np.float64)
     pose, vx = REGISTRY[task].pose(obs, model)
-    skipped = 2 if task in ("ant", "humanoid") else 1
+    skipped = 2 if task in ("ant", "ant_contact", "humanoid") else 1
     want = qpos.copy()
     want[:skipped] = 0.0
     np.testing.assert_allclose(pose, want, atol=1e-5)
