@@ -517,6 +517,13 @@ def validate(cfg: Config) -> None:
                 f"{cfg.backend!r} (MuJoCo's model options apply to a Brax task on "
                 f"{' or '.join(map(repr, MUJOCO_BACKENDS))})",
             )
+    if TASKS[cfg.env_name].contact_forces and cfg.backend not in ("auto", *MUJOCO_BACKENDS):
+        checks.fail(
+            "backend",
+            cfg.backend,
+            f"{' or '.join(map(repr, MUJOCO_BACKENDS))} with env_name {cfg.env_name!r} (its "
+            "contact forces are computed by MuJoCo; Brax's own pipelines have none)",
+        )
     checks.choice(cfg, "strategy", STRATEGIES)
     checks.choice(cfg, "uncertainty", UNCERTAINTIES)
     checks.choice(cfg, "uncertainty_reduce", REDUCTIONS)

@@ -259,6 +259,14 @@ def test_c_engine_reward_is_brax_formula(task):
     assert float(jnp.max(jnp.abs(velocity))) > 0.01  # the torso moved: the velocity term was tested
 
 
+def test_contact_forces_need_a_mujoco_backend():
+    """A task observing contact forces is refused on Brax's own pipelines, which compute none,
+    before anything is built; Brax's Ant is not."""
+    with pytest.raises(ValueError, match="backend = 'generalized' is invalid: allowed 'mjx' or"):
+        Config(env_name="ant_contact", backend="generalized")
+    assert Config(env_name="ant", backend="generalized").backend == "generalized"
+
+
 def test_ant_contact_is_ant_with_mujocos_contact_forces():
     """`ant_contact` on the C engine, against MuJoCo itself and Brax's Ant: from the same state and
     action, its observation is Ant's 27 then cfrc_ext[1:] clipped to [-1, 1] as MuJoCo computes it
