@@ -10,9 +10,15 @@ model and options, its reset distribution, observation, reward and health rule (
   `pipeline_step` call MuJoCo's C engine on the host (`jax.pure_callback`, one call per env step
   for every env of every vmapped run) on Brax's own MjModel with MJX's options (`_c_model`), and
   return a small state, `HostPhysicsState`, with the fields of MJX's state that Brax's tasks read:
-  q, qd, the bodies' frames x (and their velocities xd where a task reads them, Humanoid), plus the
-  solver's warm start that MuJoCo's step carries. Brax's own code then computes the observation,
-  reward and `done` from it, as it does from MJX's state.
+  q, qd, the bodies' frames x (and their velocities xd where a task reads them, Humanoid; their
+  external contact forces cfrc_ext where it observes them, `ant_contact`), plus the solver's warm
+  start that MuJoCo's step carries. Brax's own code then computes the observation, reward and
+  `done` from it, as it does from MJX's state.
+
+A task that observes contact forces (`TaskSpec.contact_forces`) gets them on MJX from
+`rne_postconstraint` after Brax's step, on the C engine from `mj_rnePostConstraint` after
+`mj_step`; `contact_terms`, the one place that reads them, adds them to Brax's observation and
+their cost to its reward.
 
 Why swap the physics under Brax's step rather than write each task's observation, reward and health
 rule again for the C engine: each task is then defined once, by Brax; a task reading a field that
