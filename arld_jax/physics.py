@@ -96,8 +96,8 @@ def brax_task_env(
         # Instance attributes shadow PipelineEnv's methods: Brax's reset and step call these.
         brax_env.pipeline_init = host.pipeline_init
         brax_env.pipeline_step = host.pipeline_step
-    elif spec.contact_forces:
-        with_contact_forces(brax_env, backend)
+    elif spec.contact_forces:  # 'mjx': `Config` refuses Brax's own pipelines for such a task
+        with_contact_forces(brax_env)
     terms = contact_terms(brax_env) if spec.contact_forces else None
 
     def wrap(s: Any, stepped: bool) -> EnvState:
@@ -123,15 +123,11 @@ def brax_task_env(
     )
 
 
-def with_contact_forces(brax_env: Any, backend: str) -> None:
+def with_contact_forces(brax_env: Any) -> None:
     """Brax's MJX pipeline made to fill its state's `cfrc_ext` after each init and step (MJX's
     step leaves it at 0, as MuJoCo's does: `rne_postconstraint`, MuJoCo's `mj_rnePostConstraint`,
     computes it from the last forward pass's contact forces). Brax's own pipelines have no such
     field."""
-    if backend != "mjx":
-        raise ValueError(
-            f"a task with contact forces runs on backend 'mjx' or 'mujoco', not {backend!r}"
-        )
     from mujoco import mjx
 
     init, step = brax_env.pipeline_init, brax_env.pipeline_step  # PipelineEnv's, bound
@@ -241,8 +237,9 @@ class HostPhysics:
         m = self.model
         self.bodies = m.nbody - 1  # Brax leaves out the world body
         # Per body: pos 3, quat 4; with velocities also cvel 6 and its root subtree's com 3; with
-        # forces (after those) its cfrc_ext 6.
-        self.frame_size = self.bodies * (7 + 9 * velocities + 6 * forces)
+        # forces (after those, from `forces_at`) its cfrc_ext 6.
+        self.forces_at = self.bodies * (7 + 9 * velocities)
+        self.frame_size = self.forces_at + self.bodies * 6 * forces
         self._spare: queue.SimpleQueue = queue.SimpleQueue()  # scratch MjData, one per caller
 
     @contextlib.contextmanager
@@ -273,7 +270,7 @@ class HostPhysics:
             import mujoco
 
             mujoco.mj_rnePostConstraint(m, d)  # fills cfrc_ext (mj_step does not)
-            out[len(out) - 6 * b :] = d.cfrc_ext[1:].ravel()
+            out[self.forces_at :] = d.cfrc_ext[1:].ravel()
 
     def host_step(self, packed: Any) -> np.ndarray:
         """[..., nq + nv + nv + nu] = (qpos, qvel, warm start, ctrl) -> [..., nq + nv + nv +
@@ -334,7 +331,7 @@ class HostPhysics:
             offset = Transform.create(pos=pos - frames[13 * b : 16 * b].reshape(b, 3))
             xd = offset.vmap().do(Motion(vel=cvel[:, 3:], ang=cvel[:, :3]))
         if self.forces:
-            bodies = frames[frames.shape[-1] - 6 * b :].reshape(b, 6)
+            bodies = frames[self.forces_at :].reshape(b, 6)
             cfrc_ext = jnp.concatenate([jnp.zeros((1, 6), bodies.dtype), bodies])
         return HostPhysicsState(q=q, qd=qd, qacc_warmstart=warm, x=x, xd=xd, cfrc_ext=cfrc_ext)
 

@@ -112,8 +112,8 @@ class TaskSpec:
     read q, qd and the bodies' frames only, and the C engine returns no more (`physics`)."""
     contact_forces: bool = False
     """Whether the task also observes, and pays for, the external contact force on each body, as
-    Gymnasium's Ant-v5 does and Brax's Ant documents but does not implement (brax 0.14.2 raises
-    NotImplementedError): the observation gains cfrc_ext[1:] (6 per body: torque then force about
+    Gymnasium's Ant-v5 does and Brax's Ant documents but leaves out (brax 0.14.2 refuses its
+    `use_contact_forces=True`): the observation gains cfrc_ext[1:] (6 per body: torque then force about
     the centre of mass, every body but the world), clipped to Brax's `contact_force_range`, and the
     reward loses Brax's `contact_cost_weight` x the sum of their squares (`physics`)."""
     pose: Pose | None = None
