@@ -22,7 +22,9 @@ from pathlib import Path
 import numpy as np
 
 
-def dump(task: str, out: str, episodes: int, max_steps: int, seed: int) -> None:
+def dump(
+    task: str, out: str, episodes: int, max_steps: int, seed: int, xml_out: str | None
+) -> None:
     import jax
 
     from arld_jax.config import Config
@@ -31,6 +33,8 @@ def dump(task: str, out: str, episodes: int, max_steps: int, seed: int) -> None:
 
     if task not in BRAX_TASKS:
         sys.exit(f"--task {task}: not a Brax task; allowed {sorted(BRAX_TASKS)}")
+    if xml_out:
+        write_model_xml(task, xml_out)
     env = make_env(Config(env_name=task, backend="mujoco"))
     reset, step = jax.jit(env.reset, static_argnums=1), jax.jit(env.step)
     rng = np.random.default_rng(seed)
@@ -60,6 +64,26 @@ def dump(task: str, out: str, episodes: int, max_steps: int, seed: int) -> None:
         reset_qd=np.asarray(resets.qd),
     )
     print(f"{out}: {len(rows['q'])} steps of {task} in {episodes} episodes")
+
+
+def write_model_xml(task: str, path: str) -> None:
+    """The MJCF of the model arld_jax's task steps, as Brax loaded it (its jointless bodies fused:
+    Ant's 13 bodies become 9), for a peer's `--xml-file`. Written by MuJoCo from the XML it last
+    parsed, Brax's, right after loading it; reloaded and compared before it is kept."""
+    import mujoco
+
+    from arld_jax.physics import load_brax_env
+    from arld_jax.tasks import REGISTRY
+
+    model = load_brax_env(REGISTRY[task].brax_name, "mjx").sys.mj_model
+    mujoco.mj_saveLastXML(path, model)
+    back = mujoco.MjModel.from_xml_path(path)
+    if (back.nbody, back.nq, back.ngeom) != (model.nbody, model.nq, model.ngeom) or not np.allclose(
+        back.body_mass, model.body_mass, rtol=1e-5
+    ):
+        Path(path).unlink()
+        sys.exit(f"--xml-out {path}: MuJoCo's saved XML does not reload as {task}'s model")
+    print(f"{path}: {task}'s model as Brax loads it ({model.nbody - 1} bodies)")
 
 
 def check(p: argparse.ArgumentParser, args: argparse.Namespace) -> int:
@@ -110,6 +134,7 @@ def main(argv: list[str] | None = None) -> None:
     pd.add_argument("--episodes", type=int, default=5)
     pd.add_argument("--max-steps", type=int, default=300)
     pd.add_argument("--seed", type=int, default=0)
+    pd.add_argument("--xml-out", help="also write the task's model, as Brax loads it, to this MJCF")
     pc = sub.add_parser("check", help="Gymnasium's steps from the same states (the sbx venv)")
     pc.add_argument("--steps", required=True, help="the .npz `dump` wrote")
     pc.add_argument("--atol", type=float, default=1e-3)
@@ -119,7 +144,7 @@ def main(argv: list[str] | None = None) -> None:
     add_model_args(pc)
     args = p.parse_args(argv)
     if args.half == "dump":
-        dump(args.task, args.out, args.episodes, args.max_steps, args.seed)
+        dump(args.task, args.out, args.episodes, args.max_steps, args.seed, args.xml_out)
     else:
         sys.exit(check(pc, args))
 
