@@ -9,6 +9,7 @@ and prints the largest differences; it exits with 1 if the observation
 or reward (at a step that ends no episode) differs beyond float32's rounding of arld_jax's state (`--atol`):
 
     python -m benchmarks.peers.same_model dump --task ant --out /tmp/ant_steps.npz
+        [--xml-out ant.xml]    (also the model as Brax loads it, for the peer's --xml-file)
     ../venv-sbx/bin/python -m benchmarks.peers.same_model check --steps /tmp/ant_steps.npz \\
         --env Ant-v5 --xml-file ... (the model flags of the run it vouches for)
 """
@@ -69,7 +70,9 @@ def dump(
 def write_model_xml(task: str, path: str) -> None:
     """The MJCF of the model arld_jax's task steps, as Brax loaded it (its jointless bodies fused:
     Ant's 13 bodies become 9), for a peer's `--xml-file`. Written by MuJoCo from the XML it last
-    parsed, Brax's, right after loading it; reloaded and compared before it is kept."""
+    parsed, Brax's, right after loading it; reloaded and compared before it is kept. The options
+    Brax sets on `sys` after loading (Ant's solver) are not in it: the peer takes them as
+    `--model-opt`."""
     import mujoco
 
     from arld_jax.physics import load_brax_env
