@@ -114,6 +114,8 @@ def physics_line(cfg: Config, platform: str) -> str:
     )
     solver = solver_options(cfg)
     told = "".join(f", {v} {SOLVER_WORDS[k]}" for k, v in solver.items())
+    if cfg.integrator != "task":
+        told += f", {INTEGRATORS[cfg.integrator]}"
     if cfg.contacts != "task":
         told += f", {CONTACTS[cfg.contacts]}"
     return f"physics: {cfg.backend} ({PHYSICS[cfg.backend]}; {how}{told})"
@@ -139,6 +141,25 @@ def solver_options(cfg: Config) -> dict[str, int]:
     return {SOLVER_FIELDS[f]: v for f, v in solver_settings(cfg).items()}
 
 
+INTEGRATORS: dict[str, str] = {
+    "task": "the task's own integrator",
+    "rk4": "4th-order Runge-Kutta",
+}
+"""Each choice of `Config.integrator`, in words (the line a run starts with)."""
+INTEGRATOR_OPT: dict[str, int] = {"rk4": 1}
+"""MuJoCo's `opt.integrator` (`mjtIntegrator`: mjINT_RK4 = 1) of each `Config.integrator` other
+than 'task'."""
+
+
+def model_options(cfg: Config) -> dict[str, int]:
+    """The MuJoCo options `cfg` sets over the task's own (`opt.*` name -> value): the solver's
+    (`solver_options`) and the integrator."""
+    options = solver_options(cfg)
+    if cfg.integrator != "task":
+        options["integrator"] = INTEGRATOR_OPT[cfg.integrator]
+    return options
+
+
 CONTACTS: dict[str, str] = {
     "task": "the task's own contacts",
     "all": "every body geom touches the floor",
@@ -146,7 +167,7 @@ CONTACTS: dict[str, str] = {
 """Each choice of `Config.contacts`, in words (the line a run starts with)."""
 
 
-PHYSICS_FIELDS: tuple[str, ...] = (*SOLVER_FIELDS, "contacts")
+PHYSICS_FIELDS: tuple[str, ...] = (*SOLVER_FIELDS, "integrator", "contacts")
 """The fields of `Config` that change a Brax task's MuJoCo model from Brax's."""
 
 
@@ -213,6 +234,12 @@ class Config(*AGENT_OPTIONS):
     """Physics of a Brax task on 'mjx' or 'mujoco': line-search iterations of the solver
     (`opt.ls_iterations`). 0 (the default) = the task's own: 50 from Brax's XMLs, 4 for Ant and
     Humanoid. MuJoCo's default (Gymnasium's v5 tasks) is 50."""
+    integrator: str = "task"
+    """Physics of a Brax task on 'mjx' or 'mujoco': MuJoCo's integrator (`opt.integrator`), one of
+    `INTEGRATORS`. 'task' (the default): the task's own, semi-implicit Euler in every Brax XML
+    (Brax removed the RK4 of Hopper's, Walker2d's and Humanoid's MuJoCo XMLs). 'rk4': 4th-order
+    Runge-Kutta, as Gymnasium's v5 XMLs set (Ant, Hopper, Walker2d, Humanoid); it evaluates the
+    dynamics four times per physics step, at the same timestep."""
     contacts: str = "task"
     """Physics of a Brax task on 'mjx' or 'mujoco': which geoms collide with the floor. 'task' (the
     default): Brax's, whose XMLs let only a few geoms touch the floor (Ant:
@@ -506,6 +533,7 @@ def validate(cfg: Config) -> None:
         value = getattr(cfg, name)
         if not checks.is_int(value) or value < 0:
             checks.fail(name, value, "an integer >= 1, or 0 (the task's own)")
+    checks.choice(cfg, "integrator", tuple(INTEGRATORS))
     checks.choice(cfg, "contacts", tuple(CONTACTS))
     runs_mujoco = TASKS[cfg.env_name].brax_name is not None and cfg.backend in MUJOCO_BACKENDS
     for name, value in physics_settings(cfg).items():

@@ -1,7 +1,7 @@
 """Batched environments by name: `make_env(cfg)` builds the task `cfg.env_name` (a module of
-`arld_jax.tasks`) on the physics `cfg.backend` (`arld_jax.physics`) with the solver options and
-contacts of `cfg` (`config.solver_options`, `Config.contacts`), its vmapped step chunked by
-`cfg.env_max_batch`.
+`arld_jax.tasks`) on the physics `cfg.backend` (`arld_jax.physics`) with the MuJoCo options
+(solver, integrator) and contacts of `cfg` (`config.model_options`, `Config.contacts`), its vmapped
+step chunked by `cfg.env_max_batch`.
 
 The env interface (`Env`, `EnvState`) is `arld_jax.tasks.base`'s; the names the rest of the
 package imports from here are kept here. Time limits and resets are not the env's job: the loop
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import jax
 
-from arld_jax.config import Config, solver_options
+from arld_jax.config import Config, model_options
 from arld_jax.physics import CPU_ENV_MAX_BATCH, limit_batch, without_third_party_noise
 from arld_jax.tasks import REGISTRY
 from arld_jax.tasks.base import Env, EnvState, never_upside_down
@@ -24,7 +24,7 @@ from arld_jax.tasks.toy_fall import TOY_FALL_ERROR
 
 def make_env(cfg: Config) -> Env:
     """The batched env named by `cfg.env_name`, its vmapped step limited by `cfg.env_max_batch`."""
-    env = REGISTRY[cfg.env_name].make(cfg.backend, solver_options(cfg), cfg.contacts)
+    env = REGISTRY[cfg.env_name].make(cfg.backend, model_options(cfg), cfg.contacts)
     if cfg.backend == "mujoco" and REGISTRY[cfg.env_name].brax_name is not None:
         return env  # a host loop: no chunking to tune
     max_batch = cfg.env_max_batch

@@ -73,9 +73,9 @@ def brax_task_env(
     spec: TaskSpec, backend: str, solver: dict[str, int] | None = None, contacts: str = "task"
 ) -> Env:
     """The batched env of the Brax task `spec` on `backend` (see the module docstring), with
-    MuJoCo's solver options `solver` (`opt.*` name -> value, e.g. {'iterations': 100}) over the
-    task's own and the contacts `contacts` (`Config.contacts`): set on Brax's `sys`, which MJX
-    steps and the C engine's model copies (`_c_model`)."""
+    MuJoCo's options `solver` (`opt.*` name -> value, e.g. {'iterations': 100, 'integrator': 1}:
+    `config.model_options`) over the task's own and the contacts `contacts` (`Config.contacts`):
+    set on Brax's `sys`, which MJX steps and the C engine's model copies (`_c_model`)."""
     brax_env = load_brax_env(spec.brax_name, "mjx" if backend == "mujoco" else backend)
     if solver:
         brax_env.sys = brax_env.sys.tree_replace({f"opt.{k}": v for k, v in solver.items()})

@@ -98,6 +98,10 @@ def test_auto_backend_is_resolved_when_the_config_is_built(monkeypatch, platform
     assert config.physics_line(cfg.replace(env_name="ant", contacts="all"), platform).endswith(
         ", every body geom touches the floor)"
     )
+    rk4 = solver.replace(integrator="rk4")
+    assert config.model_options(rk4) == {"iterations": 100, "ls_iterations": 50, "integrator": 1}
+    assert config.model_options(cfg) == {} and "Runge" not in config.physics_line(cfg, platform)
+    assert config.physics_line(rk4, platform).endswith(", 4th-order Runge-Kutta)")
 
 
 @pytest.mark.parametrize(
@@ -117,6 +121,11 @@ def test_auto_backend_is_resolved_when_the_config_is_built(monkeypatch, platform
             "allowed 'task' with env_name 'toy' and backend 'mujoco' \\(MuJoCo's model options",
         ),
         (dict(backend="spring", contacts="all"), "contacts = 'all' is invalid.*backend 'spring'"),
+        (dict(integrator="rk2"), "integrator = 'rk2' is invalid: allowed one of 'task', 'rk4'"),
+        (
+            dict(env_name="toy", integrator="rk4"),
+            "integrator = 'rk4' is invalid: allowed 'task' with env_name 'toy'",
+        ),
     ],
 )
 def test_solver_options_are_checked(changes, message) -> None:

@@ -92,6 +92,41 @@ def test_solver_options_reach_both_engines():
     assert explicit == own and mujoco != own
 
 
+def test_integrator_reaches_both_engines():
+    """`--integrator rk4` sets MuJoCo's RK4 on both backends: the C engine's model integrates with
+    mjINT_RK4 and its steps from the same states differ from Euler's; MJX traces a different step."""
+    import mujoco
+
+    from arld_jax.config import INTEGRATOR_OPT
+    from arld_jax.physics import _c_model
+
+    assert INTEGRATOR_OPT == {"rk4": int(mujoco.mjtIntegrator.mjINT_RK4)}
+
+    def hopper(backend, integrator):
+        return make_env(Config(env_name="hopper", backend=backend, integrator=integrator))
+
+    def c_steps(env):
+        state = jax.jit(env.reset, static_argnums=1)(jax.random.key(6), 2)
+        step = jax.jit(env.step)
+        for i in range(10):
+            action = jax.random.uniform(jax.random.key(i), (2, 3), minval=-1.0, maxval=1.0)
+            state = step(state, action)
+        return np.asarray(state.obs)
+
+    euler, rk4 = (c_steps(hopper("mujoco", i)) for i in ("task", "rk4"))
+    assert np.all(np.isfinite(rk4)) and float(np.max(np.abs(rk4 - euler))) > 1e-4
+    sys = load_brax_env("hopper", "mjx").sys
+    rk4_sys = sys.tree_replace({"opt.integrator": INTEGRATOR_OPT["rk4"]})
+    assert _c_model(sys).opt.integrator == mujoco.mjtIntegrator.mjINT_EULER
+    assert _c_model(rk4_sys).opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
+
+    def mjx_step(env):
+        state = jax.eval_shape(lambda k: env.reset(k, 2), jax.random.key(0))
+        return str(jax.make_jaxpr(env.step)(state, jnp.zeros((2, env.action_dim))))
+
+    assert mjx_step(hopper("mjx", "rk4")) != mjx_step(hopper("mjx", "task"))
+
+
 def _upside_down(state, height: float):
     """The C-engine Ant state `state` turned on its back (half a turn about x), its torso at
     `height`."""

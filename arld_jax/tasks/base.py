@@ -133,8 +133,8 @@ class TaskSpec:
         self, backend: str, solver: dict[str, int] | None = None, contacts: str = "task"
     ) -> Env:
         """The batched env on `backend` ('mjx', 'mujoco', or one of Brax's own pipelines), with
-        MuJoCo's solver options `solver` (`opt.*` name -> value) over the task's own and the
-        contacts `contacts` (`Config.contacts`)."""
+        MuJoCo's options `solver` (`opt.*` name -> value: the solver's, the integrator) over the
+        task's own and the contacts `contacts` (`Config.contacts`)."""
         if self.make_pure is not None:
             return self.make_pure()
         from arld_jax import physics
