@@ -70,15 +70,15 @@ if TYPE_CHECKING:
 
 
 def brax_task_env(
-    spec: TaskSpec, backend: str, solver: dict[str, int] | None = None, contacts: str = "task"
+    spec: TaskSpec, backend: str, options: dict[str, int] | None = None, contacts: str = "task"
 ) -> Env:
     """The batched env of the Brax task `spec` on `backend` (see the module docstring), with
-    MuJoCo's options `solver` (`opt.*` name -> value, e.g. {'iterations': 100, 'integrator': 1}:
+    MuJoCo's options `options` (`opt.*` name -> value, e.g. {'iterations': 100, 'integrator': 1}:
     `config.model_options`) over the task's own and the contacts `contacts` (`Config.contacts`):
     set on Brax's `sys`, which MJX steps and the C engine's model copies (`_c_model`)."""
     brax_env = load_brax_env(spec.brax_name, "mjx" if backend == "mujoco" else backend)
-    if solver:
-        brax_env.sys = brax_env.sys.tree_replace({f"opt.{k}": v for k, v in solver.items()})
+    if options:
+        brax_env.sys = brax_env.sys.tree_replace({f"opt.{k}": v for k, v in options.items()})
     if contacts == "all":
         brax_env.sys = all_geoms_touch_floor(brax_env.sys)
     # Brax's health rule is on exactly when its env says so; the loop needs it statically.

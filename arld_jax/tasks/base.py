@@ -130,13 +130,13 @@ class TaskSpec:
         return self.upside_down is not never_upside_down
 
     def make(
-        self, backend: str, solver: dict[str, int] | None = None, contacts: str = "task"
+        self, backend: str, options: dict[str, int] | None = None, contacts: str = "task"
     ) -> Env:
         """The batched env on `backend` ('mjx', 'mujoco', or one of Brax's own pipelines), with
-        MuJoCo's options `solver` (`opt.*` name -> value: the solver's, the integrator) over the
+        MuJoCo's options `options` (`opt.*` name -> value: the solver's, the integrator) over the
         task's own and the contacts `contacts` (`Config.contacts`)."""
         if self.make_pure is not None:
             return self.make_pure()
         from arld_jax import physics
 
-        return physics.brax_task_env(self, backend, solver, contacts)
+        return physics.brax_task_env(self, backend, options, contacts)
