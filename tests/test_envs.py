@@ -57,6 +57,23 @@ def test_every_brax_task_has_a_module_and_checked_options():
     assert (ant.opt.iterations, ant.opt.ls_iterations) == (1, 4)
 
 
+def _c_obs(env, steps: int):
+    """The observations of 2 C-engine envs after `steps` uniform-random actions from a fixed reset
+    (the same states and actions for every `env` of a task)."""
+    state = jax.jit(env.reset, static_argnums=1)(jax.random.key(6), 2)
+    step = jax.jit(env.step)
+    for i in range(steps):
+        shape = (2, env.action_dim)
+        state = step(state, jax.random.uniform(jax.random.key(i), shape, minval=-1.0, maxval=1.0))
+    return np.asarray(state.obs)
+
+
+def _mjx_step(env) -> str:
+    """The traced MJX step of 2 envs of `env`, as text: equal exactly when the step is the same."""
+    state = jax.eval_shape(lambda k: env.reset(k, 2), jax.random.key(0))
+    return str(jax.make_jaxpr(env.step)(state, jnp.zeros((2, env.action_dim))))
+
+
 def test_solver_options_reach_both_engines():
     """`--solver_iterations` / `--solver_ls_iterations` set MuJoCo's solver on both backends: Ant
     with its own options given explicitly (1 iteration, 4 line searches) is the default Ant, bit
@@ -72,23 +89,12 @@ def test_solver_options_reach_both_engines():
         )
         return make_env(cfg)
 
-    def c_steps(env):
-        state = jax.jit(env.reset, static_argnums=1)(jax.random.key(6), 2)
-        step = jax.jit(env.step)
-        for i in range(20):  # enough for the feet to land: contacts are what the solver solves
-            action = jax.random.uniform(jax.random.key(i), (2, 8), minval=-1.0, maxval=1.0)
-            state = step(state, action)
-        return np.asarray(state.obs)
-
-    own, explicit, mujoco = (c_steps(ant("mujoco", *s)) for s in ((0, 0), (1, 4), (100, 50)))
+    # 20 steps: enough for the feet to land; contacts are what the solver solves.
+    own, explicit, mujoco = (_c_obs(ant("mujoco", *s), 20) for s in ((0, 0), (1, 4), (100, 50)))
     np.testing.assert_array_equal(explicit, own)
     assert float(np.max(np.abs(mujoco - own))) > 1e-4
 
-    def mjx_step(env):
-        state = jax.eval_shape(lambda k: env.reset(k, 2), jax.random.key(0))
-        return str(jax.make_jaxpr(env.step)(state, jnp.zeros((2, env.action_dim))))
-
-    own, explicit, mujoco = (mjx_step(ant("mjx", *s)) for s in ((0, 0), (1, 4), (100, 50)))
+    own, explicit, mujoco = (_mjx_step(ant("mjx", *s)) for s in ((0, 0), (1, 4), (100, 50)))
     assert explicit == own and mujoco != own
 
 
@@ -105,26 +111,14 @@ def test_integrator_reaches_both_engines():
     def hopper(backend, integrator):
         return make_env(Config(env_name="hopper", backend=backend, integrator=integrator))
 
-    def c_steps(env):
-        state = jax.jit(env.reset, static_argnums=1)(jax.random.key(6), 2)
-        step = jax.jit(env.step)
-        for i in range(10):
-            action = jax.random.uniform(jax.random.key(i), (2, 3), minval=-1.0, maxval=1.0)
-            state = step(state, action)
-        return np.asarray(state.obs)
-
-    euler, rk4 = (c_steps(hopper("mujoco", i)) for i in ("task", "rk4"))
+    euler, rk4 = (_c_obs(hopper("mujoco", i), 10) for i in ("task", "rk4"))
     assert np.all(np.isfinite(rk4)) and float(np.max(np.abs(rk4 - euler))) > 1e-4
     sys = load_brax_env("hopper", "mjx").sys
     rk4_sys = sys.tree_replace({"opt.integrator": INTEGRATOR_OPT["rk4"]})
     assert _c_model(sys).opt.integrator == mujoco.mjtIntegrator.mjINT_EULER
     assert _c_model(rk4_sys).opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
 
-    def mjx_step(env):
-        state = jax.eval_shape(lambda k: env.reset(k, 2), jax.random.key(0))
-        return str(jax.make_jaxpr(env.step)(state, jnp.zeros((2, env.action_dim))))
-
-    assert mjx_step(hopper("mjx", "rk4")) != mjx_step(hopper("mjx", "task"))
+    assert _mjx_step(hopper("mjx", "rk4")) != _mjx_step(hopper("mjx", "task"))
 
 
 def _upside_down(state, height: float):
