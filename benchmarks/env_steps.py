@@ -5,6 +5,7 @@
     python -m benchmarks.env_steps --tasks hopper,ant --steps 4000 --repeats 5
     python -m benchmarks.env_steps --tasks ant --solvers default,100/50   # what a solver costs
     python -m benchmarks.env_steps --tasks ant --contacts task,all        # what contacts cost
+    python -m benchmarks.env_steps --tasks ant --integrators task,rk4     # what RK4 costs
 
 Each (task, backend) is one jitted program, compiled as the driver compiles
 (`compile.compiler_options()`): a `lax.scan` of `--steps` steps of one env with uniform-random
@@ -14,8 +15,8 @@ compiles (its time is reported, not counted), then `--repeats` timed calls; env 
 steps / median call time. No agent, no replay: at 1 env and one update per env step a SAC update
 costs about as much again or more (benchmarks/README.md), so this is an upper bound of a run's
 rate. `--solvers` times each task again under other MuJoCo solver options
-(`Config.solver_iterations`, `Config.solver_ls_iterations`) and `--contacts` under other contacts
-(`Config.contacts`), in the same run, so that their ratio means something on a machine whose speed
+(`Config.solver_iterations`, `Config.solver_ls_iterations`), `--contacts` under other contacts
+(`Config.contacts`) and `--integrators` under other integrators (`Config.integrator`), in the same run, so that their ratio means something on a machine whose speed
 drifts. A timing: run it on a quiet machine (the report records the load average).
 
 The JSON report goes to benchmarks/results/<YYYY-MM-DD>-env-steps.json (or `--out`), rewritten
@@ -109,6 +110,7 @@ def measure(cfg: Config, steps: int, repeats: int) -> dict[str, Any]:
         "backend": cfg.backend,
         "solver": solver_settings(cfg),
         "contacts": cfg.contacts,
+        "integrator": cfg.integrator,
         "obs_dim": env.obs_dim,
         "action_dim": env.action_dim,
         "steps_per_call": steps,
@@ -141,6 +143,11 @@ def main(argv: list[str] | None = None) -> None:
         default="task",
         help="comma list of contacts (`Config.contacts`) to time each task under",
     )
+    parser.add_argument(
+        "--integrators",
+        default="task",
+        help="comma list of integrators (`Config.integrator`) to time each task under",
+    )
     parser.add_argument("--note", default="", help="a remark recorded in the report")
     parser.add_argument("--out", default=None, help="the JSON report (default: by date)")
     args = parser.parse_args(argv)
@@ -148,11 +155,18 @@ def main(argv: list[str] | None = None) -> None:
     backends = [b for b in args.backends.split(",") if b]
     try:  # every setting is checked (`Config` validates itself) before anything compiles
         cfgs = [
-            Config(env_name=task, backend=backend, contacts=contacts, **solver)
+            Config(
+                env_name=task,
+                backend=backend,
+                contacts=contacts,
+                integrator=integrator,
+                **solver,
+            )
             for backend in backends
             for task in tasks
             for solver in parse_solvers(args.solvers)
             for contacts in args.contacts.split(",")
+            for integrator in args.integrators.split(",")
         ]
     except ValueError as e:
         parser.error(str(e))
@@ -171,12 +185,15 @@ def main(argv: list[str] | None = None) -> None:
     rows = []
     for cfg in cfgs:
         solver = "/".join(map(str, solver_settings(cfg).values())) or "default"
-        log(f"{cfg.env_name} on {cfg.backend}, solver {solver}, contacts {cfg.contacts} ...")
+        log(
+            f"{cfg.env_name} on {cfg.backend}, solver {solver}, contacts {cfg.contacts}, "
+            f"integrator {cfg.integrator} ..."
+        )
         r = measure(cfg, args.steps, args.repeats)
         report["results"].append(r)
         save()
         rows.append(
-            [cfg.env_name, cfg.backend, solver, cfg.contacts, r["env_steps_per_s"]]
+            [cfg.env_name, cfg.backend, solver, cfg.contacts, cfg.integrator, r["env_steps_per_s"]]
             + [r["us_per_step"]]
             + [r["compile_s"], r["falls_per_1000_steps"]]
         )
@@ -188,6 +205,7 @@ def main(argv: list[str] | None = None) -> None:
             "backend",
             "solver",
             "contacts",
+            "integrator",
             "env steps/s",
             "us/step",
             "compile s",

@@ -265,6 +265,8 @@ def test_env_steps_benchmark_reads_physics_settings_and_refuses_bad_ones(capsys,
         (["--tasks", "ant", "--solvers", "default,1/"], "--solvers: got '1/'"),
         (["--tasks", "toy", "--solvers", "100/50"], "Config.solver_iterations = 100"),
         (["--tasks", "ant", "--contacts", "task,every"], "Config.contacts = 'every' is invalid"),
+        (["--tasks", "ant", "--integrators", "rk4,euler"], "Config.integrator = 'euler'"),
+        (["--tasks", "toy", "--integrators", "rk4"], "Config.integrator = 'rk4' is invalid"),
     ):
         with pytest.raises(SystemExit) as exit_:  # refused before anything compiles or is written
             env_steps.main([*argv, "--backends", "mujoco", "--out", str(out)])
