@@ -16,8 +16,9 @@ steps / median call time. No agent, no replay: at 1 env and one update per env s
 costs about as much again or more (benchmarks/README.md), so this is an upper bound of a run's
 rate. `--solvers` times each task again under other MuJoCo solver options
 (`Config.solver_iterations`, `Config.solver_ls_iterations`), `--contacts` under other contacts
-(`Config.contacts`) and `--integrators` under other integrators (`Config.integrator`), in the same run, so that their ratio means something on a machine whose speed
-drifts. A timing: run it on a quiet machine (the report records the load average).
+(`Config.contacts`) and `--integrators` under other integrators (`Config.integrator`), in the
+same run, so that their ratio means something on a machine whose speed drifts. A timing: run it
+on a quiet machine (the report records the load average).
 
 The JSON report goes to benchmarks/results/<YYYY-MM-DD>-env-steps.json (or `--out`), rewritten
 after each measurement, with the package versions and the machine's description
