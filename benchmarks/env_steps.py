@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import itertools
 import json
 import os
 import shlex
@@ -49,6 +50,8 @@ from arld_jax.tasks import BRAX_TASKS
 from benchmarks.harness import RESULTS_DIR, block, log, machine_info, print_table, repo_path
 
 BACKENDS = ("mujoco", "mjx")
+CHOICE_LISTS: dict[str, str] = {"contacts": "contacts", "integrators": "integrator"}
+"""Comma-list flags of physics choices -> the `Config` field each sets; their product is timed."""
 SOLVER_FORMAT = "'default' (the task's own) or ITERATIONS/LS_ITERATIONS, for example 100/50"
 
 
@@ -139,16 +142,12 @@ def main(argv: list[str] | None = None) -> None:
         default="default",
         help=f"comma list of MuJoCo solver settings to time each task under, each {SOLVER_FORMAT}",
     )
-    parser.add_argument(
-        "--contacts",
-        default="task",
-        help="comma list of contacts (`Config.contacts`) to time each task under",
-    )
-    parser.add_argument(
-        "--integrators",
-        default="task",
-        help="comma list of integrators (`Config.integrator`) to time each task under",
-    )
+    for flag, field in CHOICE_LISTS.items():
+        parser.add_argument(
+            f"--{flag}",
+            default="task",
+            help=f"comma list of `Config.{field}` values to time each task under",
+        )
     parser.add_argument("--note", default="", help="a remark recorded in the report")
     parser.add_argument("--out", default=None, help="the JSON report (default: by date)")
     args = parser.parse_args(argv)
@@ -159,15 +158,13 @@ def main(argv: list[str] | None = None) -> None:
             Config(
                 env_name=task,
                 backend=backend,
-                contacts=contacts,
-                integrator=integrator,
                 **solver,
+                **dict(zip(CHOICE_LISTS.values(), c, strict=True)),
             )
             for backend in backends
             for task in tasks
             for solver in parse_solvers(args.solvers)
-            for contacts in args.contacts.split(",")
-            for integrator in args.integrators.split(",")
+            for c in itertools.product(*(getattr(args, f).split(",") for f in CHOICE_LISTS))
         ]
     except ValueError as e:
         parser.error(str(e))
