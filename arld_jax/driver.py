@@ -174,6 +174,8 @@ def run_sweep(
         raise ValueError(f"an unbatched run_sweep trains one run, this sweep has {sweep.num_runs}")
     if expert is None and sweep.needs_expert():
         expert = expert_for(cfg)
+    if expert is not None and (note := expert_physics_note(expert.meta, cfg)):
+        log(note)
     # The program's static config: the base, without actor noise draws when no run is noisy.
     trainer = make_train(sweep.program_config(), expert)
     identity = (
@@ -515,6 +517,29 @@ def expert_config(meta: dict[str, Any], backend: str | None = None) -> Config:
     physics = {f: meta[f] for f in config_mod.PHYSICS_FIELDS if f in meta}
     return Config(
         env_name=meta["env_name"], backend=backend or meta.get("backend", "mjx"), **physics
+    )
+
+
+def expert_physics_note(meta: dict[str, Any], cfg: Config) -> str | None:
+    """The line a run logs when its expert was trained in other physics than the run's
+    (`PHYSICS_FIELDS`, read from its metadata as `expert_config` reads them), e.g. the expert of
+    Gymnasium's physics asked in Brax's: allowed, since a demonstrator need not share the learner's
+    simulator, but then its demonstrations play in physics it was not trained in and may fall where
+    it ran. None where the two agree or the expert records no task."""
+    if "env_name" not in meta:
+        return None
+    trained = config_mod.physics_settings(expert_config(meta))
+    here = config_mod.physics_settings(cfg)
+    if trained == here:
+        return None
+
+    def words(settings: dict[str, Any]) -> str:
+        return " ".join(f"--{k} {v}" for k, v in sorted(settings.items())) or "Brax's own model"
+
+    return (
+        f"note: the expert was trained with {words(trained)}, this run has {words(here)}: its "
+        "demonstrations play in physics it was not trained in (give the run the expert's options "
+        "to ask it in its own)"
     )
 
 

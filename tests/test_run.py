@@ -15,6 +15,7 @@ import pytest
 
 from arld_jax import cli, compare, driver, plots, run, rundir, summary
 from arld_jax import config as config_mod
+from arld_jax.config import Config
 from arld_jax.sweep import SHIPPED_EXPERT, Sweep, SweepGroup, expert_path_for, preset_tiny
 
 REPO = Path(__file__).resolve().parents[1]
@@ -516,6 +517,27 @@ def test_an_expert_plays_in_the_physics_it_was_trained_in():
     }
     with pytest.raises(ValueError, match="solver_iterations = 100 is invalid"):
         driver.expert_config(solver, backend="spring")
+
+
+def test_a_run_notes_an_expert_trained_in_other_physics():
+    """An expert asked in physics other than its own is allowed but named in the run's log: the
+    options that differ on each side; nothing where they agree (an expert that records no physics
+    was trained in Brax's own model) or where the expert records no task (the toy expert)."""
+    gym = {"env_name": "ant_contact", "backend": "mujoco", "integrator": "rk4", "contacts": "all"}
+    brax = Config(env_name="ant_contact", backend="mujoco")
+    note = driver.expert_physics_note(gym, brax)
+    assert note is not None
+    assert "trained with --contacts all --integrator rk4" in note
+    assert "this run has Brax's own model" in note
+    same = brax.replace(integrator="rk4", contacts="all", backend="mjx")  # the engine may differ
+    assert driver.expert_physics_note(gym, same) is None
+    rk4_only = brax.replace(integrator="rk4")
+    assert "this run has --integrator rk4:" in driver.expert_physics_note(gym, rk4_only)
+    assert driver.expert_physics_note({"env_name": "ant_contact"}, brax) is None
+    assert "Brax's own model, this run has --integrator rk4" in driver.expert_physics_note(
+        {"env_name": "ant_contact"}, rk4_only
+    )
+    assert driver.expert_physics_note({"obs_dim": 3}, rk4_only) is None
 
 
 def test_shipped_expert_runs_as_well_in_mujoco_c_physics(capsys):
