@@ -50,6 +50,15 @@ WRITTEN_FILES: tuple[str, ...] = (
 """The files a run directory's own writers (the sweep, `plot`) own: no --out may replace one."""
 
 
+def recorded_field(config: dict[str, Any], name: str) -> Any:
+    """Config field `name` as the config a run directory saved (`config.json`'s "config") records
+    it. A field added to Config after the directory was written reads as its default: new fields
+    keep the old behaviour at their default, so that is what the run had."""
+    if name in config or name not in FIELDS:
+        return config.get(name)
+    return json.loads(json.dumps(FIELDS[name].default))
+
+
 def check_or_write_identity(out: Path, identity: dict[str, Any]) -> bool:
     """Write config.json, or check it matches. Returns True if the directory already held this run."""
     path = out / CONFIG_FILE
@@ -58,10 +67,10 @@ def check_or_write_identity(out: Path, identity: dict[str, Any]) -> bool:
         keys = ("config", "sweep", "seeds")
         old = {k: saved.get(k) for k in keys}
         new = json.loads(json.dumps({k: identity[k] for k in keys}))
-        # A Config field added after the run was saved, at its default, is what the run had (new
-        # fields keep the old behaviour at their default), so it does not block resuming.
+        # A Config field added after the run was saved, at its default, is what the run had
+        # (`recorded_field`), so it does not block resuming.
         for f in set(new["config"]) - set(old["config"] or {}):
-            if f in FIELDS and new["config"][f] == json.loads(json.dumps(FIELDS[f].default)):
+            if f in FIELDS and new["config"][f] == recorded_field(old["config"] or {}, f):
                 del new["config"][f]
         if old != new:
             diffs = []
@@ -298,6 +307,11 @@ POOL_MAY_DIFFER: tuple[str, ...] = ("seed", "total_env_steps")
 keeps the evaluations all of them have)."""
 
 
+def _pooled_value(run: RunDir, name: str) -> Any:
+    """What `pool_runs` compares under `name`: the run's sweep or expert, or a Config field."""
+    return run.config.get(name) if name in ("sweep", "expert") else recorded_field(run.cfg, name)
+
+
 def pool_runs(run_dirs: Sequence[str | Path | RunDir]) -> RunDir:
     """Run directories of one experiment run with different seeds (seeds 0-4, later 5-9 with the
     same command and another --out), read as one: their runs side by side, in the order given,
@@ -315,7 +329,7 @@ def pool_runs(run_dirs: Sequence[str | Path | RunDir]) -> RunDir:
     for other in runs[1:]:
         fields = sorted(set(first.cfg) | set(other.cfg))
         differ = [f for f in fields if f not in POOL_MAY_DIFFER
-                  and first.cfg.get(f) != other.cfg.get(f)]  # fmt: skip
+                  and recorded_field(first.cfg, f) != recorded_field(other.cfg, f)]  # fmt: skip
         for what in ("sweep", "expert"):
             a, b = first.config.get(what), other.config.get(what)
             if what == "sweep":
@@ -324,8 +338,7 @@ def pool_runs(run_dirs: Sequence[str | Path | RunDir]) -> RunDir:
                 differ.append(what)
         if differ:
             shown = ", ".join(
-                f"{f} {first.cfg.get(f, first.config.get(f))!r} against "
-                f"{other.cfg.get(f, other.config.get(f))!r}"
+                f"{f} {_pooled_value(first, f)!r} against {_pooled_value(other, f)!r}"
                 for f in differ
             )
             raise ValueError(

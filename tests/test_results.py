@@ -707,6 +707,27 @@ def test_pooling_refuses_shared_seeds_and_other_configs(tmp_path: Path) -> None:
     assert rundir.pool_runs([first, longer]).periods == PERIODS
 
 
+def test_pooling_reads_a_field_added_later_as_its_default(tmp_path: Path) -> None:
+    """A directory written before a Config field existed pools with one that records the field at
+    its default (that is what the older run had), and not with one that sets it otherwise."""
+    cells, sweep = NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]}
+    older = write_run_dir(tmp_path / "old", cells, sweep)
+    assert "integrator" not in json.loads((older / "config.json").read_text())["config"]
+
+    def recording(name: str, seed: int, integrator: str) -> Path:
+        path = write_run_dir(tmp_path / name, cells, sweep, seeds=(seed,))
+        config = json.loads((path / "config.json").read_text())
+        config["config"]["integrator"] = integrator
+        (path / "config.json").write_text(json.dumps(config))
+        return path
+
+    pooled = rundir.pool_runs([older, recording("new", 7, "task")])
+    assert len(pooled.runs) == len(cells) * (len(SEEDS) + 1)
+    rk4 = recording("rk4", 8, "rk4")
+    with pytest.raises(ValueError, match="differ in integrator 'task' against 'rk4'"):
+        rundir.pool_runs([older, rk4])
+
+
 def test_compare_command_pools_comma_separated_directories(tmp_path: Path, capsys) -> None:
     """`compare A1,A2 B` pools A1 and A2; the text says at which env steps B, longer, is read for
     the final return; a pooling error is a clean exit naming the problem."""
