@@ -307,9 +307,13 @@ POOL_MAY_DIFFER: tuple[str, ...] = ("seed", "total_env_steps")
 keeps the evaluations all of them have)."""
 
 
+POOL_SAME_ENTRIES: tuple[str, ...] = ("sweep", "expert")
+"""The entries of config.json besides the config that pooled directories share (sweep: but seeds)."""
+
+
 def _pooled_value(run: RunDir, name: str) -> Any:
-    """What `pool_runs` compares under `name`: the run's sweep or expert, or a Config field."""
-    return run.config.get(name) if name in ("sweep", "expert") else recorded_field(run.cfg, name)
+    """What `pool_runs` compares under `name`: one of `POOL_SAME_ENTRIES`, or a Config field."""
+    return run.config.get(name) if name in POOL_SAME_ENTRIES else recorded_field(run.cfg, name)
 
 
 def pool_runs(run_dirs: Sequence[str | Path | RunDir]) -> RunDir:
@@ -330,7 +334,7 @@ def pool_runs(run_dirs: Sequence[str | Path | RunDir]) -> RunDir:
         fields = sorted(set(first.cfg) | set(other.cfg))
         differ = [f for f in fields if f not in POOL_MAY_DIFFER
                   and recorded_field(first.cfg, f) != recorded_field(other.cfg, f)]  # fmt: skip
-        for what in ("sweep", "expert"):
+        for what in POOL_SAME_ENTRIES:
             a, b = first.config.get(what), other.config.get(what)
             if what == "sweep":
                 a, b = [{k: v for k, v in (x or {}).items() if k != "seed"} for x in (a, b)]
