@@ -311,9 +311,13 @@ POOL_SAME_ENTRIES: tuple[str, ...] = ("sweep", "expert")
 """The entries of config.json besides the config that pooled directories share (sweep: but seeds)."""
 
 
-def _pooled_value(run: RunDir, name: str) -> Any:
-    """What `pool_runs` compares under `name`: one of `POOL_SAME_ENTRIES`, or a Config field."""
-    return run.config.get(name) if name in POOL_SAME_ENTRIES else recorded_field(run.cfg, name)
+def _pool_identity(run: RunDir) -> dict[str, Any]:
+    """What `pool_runs` requires pooled directories to share: every Config field but
+    `POOL_MAY_DIFFER` as the directory records it (`recorded_field`), and `POOL_SAME_ENTRIES`."""
+    identity = {f: recorded_field(run.cfg, f) for f in set(run.cfg) | set(FIELDS)}
+    identity.update({what: run.config.get(what) for what in POOL_SAME_ENTRIES})
+    identity["sweep"] = {k: v for k, v in (identity["sweep"] or {}).items() if k != "seed"}
+    return {k: v for k, v in identity.items() if k not in POOL_MAY_DIFFER}
 
 
 def pool_runs(run_dirs: Sequence[str | Path | RunDir]) -> RunDir:
@@ -330,21 +334,12 @@ def pool_runs(run_dirs: Sequence[str | Path | RunDir]) -> RunDir:
     if len(runs) == 1:
         return runs[0]
     first = runs[0]
+    want = _pool_identity(first)
     for other in runs[1:]:
-        fields = sorted(set(first.cfg) | set(other.cfg))
-        differ = [f for f in fields if f not in POOL_MAY_DIFFER
-                  and recorded_field(first.cfg, f) != recorded_field(other.cfg, f)]  # fmt: skip
-        for what in POOL_SAME_ENTRIES:
-            a, b = first.config.get(what), other.config.get(what)
-            if what == "sweep":
-                a, b = [{k: v for k, v in (x or {}).items() if k != "seed"} for x in (a, b)]
-            if a != b:
-                differ.append(what)
+        have = _pool_identity(other)
+        differ = [f for f in sorted(set(want) | set(have)) if want.get(f) != have.get(f)]
         if differ:
-            shown = ", ".join(
-                f"{f} {_pooled_value(first, f)!r} against {_pooled_value(other, f)!r}"
-                for f in differ
-            )
+            shown = ", ".join(f"{f} {want.get(f)!r} against {have.get(f)!r}" for f in differ)
             raise ValueError(
                 f"cannot pool {first.path} and {other.path}: they differ in {shown} (pooled "
                 f"directories may differ only in {', '.join(POOL_MAY_DIFFER)})"
