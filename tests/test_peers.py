@@ -84,11 +84,10 @@ def test_readings_match_hand_values_and_scipy_welch(ours: Path, tmp_path: Path) 
     assert (row["ours_mean"], row["peer_mean"]) == pytest.approx((210.0, 100.0))
     assert row["separated"] is True and row["welch_lo"] > 0
 
-    # late: the last 2 of ours' 20 evaluations (1,950 + 10 seed) against sbx's own last 10% of its
-    # 10, i.e. none: its window is too short, so the reading is nan, not a made-up number
-    late = by["late return"]
-    assert late["ours_mean"] == pytest.approx(1960.0)
-    assert np.isnan(late["peer_mean"])
+    # late: of the 10 evaluations both have, the last tenth is one evaluation, too few for a
+    # late return: nan on both sides, not a reading of different stretches
+    late = by["late return (of 10 common evaluations)"]
+    assert np.isnan(late["ours_mean"]) and np.isnan(late["peer_mean"])
 
     # AUC over the 10 evaluations both have: ours' even-numbered evaluations
     auc = by["AUC over 10 common evaluations"]
@@ -102,12 +101,28 @@ def test_readings_match_hand_values_and_scipy_welch(ours: Path, tmp_path: Path) 
 
 def test_late_return_uses_the_same_window_on_both_sides(ours: Path, tmp_path: Path) -> None:
     files = [write_sbx(tmp_path / f"s{s}.json", s, ALL_STEPS) for s in (0, 1)]
-    late = {
+    rows = vs_sbx.readings(vs_sbx.load_ours([ours]), vs_sbx.load_sbx(files), [])
+    late = {r["reading"]: r for r in rows}["late return (of 20 common evaluations)"]
+    assert late["ours_mean"] == pytest.approx(1960.0)  # 1,900 and 2,000, + 10 seed
+    expected = np.mean([np.mean(sbx_curve(s, ALL_STEPS)[-2:]) for s in (0, 1)])
+    assert late["peer_mean"] == pytest.approx(expected)
+
+
+def test_a_longer_peer_is_read_over_the_stretch_both_have(ours: Path, tmp_path: Path) -> None:
+    """sbx evaluated to 40k, ours to 20k: the late return and AUC are sbx's at 1k-20k, not its
+    own last evaluations (its line keeps rising to 40k)."""
+    longer = [(p + 1) * EVAL_EVERY for p in range(2 * PERIODS)]
+    files = [write_sbx(tmp_path / f"s{s}.json", s, longer) for s in (0, 1)]
+    rows = {
         r["reading"]: r
         for r in vs_sbx.readings(vs_sbx.load_ours([ours]), vs_sbx.load_sbx(files), [])
     }
-    expected = np.mean([np.mean(sbx_curve(s, ALL_STEPS)[-2:]) for s in (0, 1)])
-    assert late["late return"]["peer_mean"] == pytest.approx(expected)
+    first_half = [np.array(sbx_curve(s, longer)[:PERIODS]) for s in (0, 1)]
+    late = rows["late return (of 20 common evaluations)"]
+    assert late["peer_mean"] == pytest.approx(np.mean([c[-2:].mean() for c in first_half]))
+    auc = rows["AUC over 20 common evaluations"]
+    assert auc["peer_mean"] == pytest.approx(np.mean([c.mean() for c in first_half]))
+    assert auc["ours_mean"] == pytest.approx(1060.0)  # mean of 100 (p + 1) over p < 20, + 10
 
 
 def test_unfinished_mixed_or_repeated_sbx_runs_are_refused(tmp_path: Path) -> None:

@@ -9,8 +9,9 @@ Ours: one cell of a run directory, or of several pooled (comma-separated, as `su
 env with the same evaluation steps. A seed's evaluation is the mean of its deterministic episodes
 on both sides. Each reading gives both sides' mean ± 95% half-width over seeds and Welch's 95%
 interval of ours − sbx (`arld_jax.stats.welch_ci95`, how the project reads a difference between
-two runs): the return at each `--at`, the late return (`stats.late_return`, the same last tenth
-of the evaluations on both sides) and the AUC (mean return) over the evaluations both sides have.
+two runs): the return at each `--at`, and over the evaluations both sides have (a shorter run is
+read against the same stretch of the longer one) the late return (`stats.late_return`, their last
+tenth) and the AUC (mean return).
 """
 
 from __future__ import annotations
@@ -106,7 +107,8 @@ def reading(name: str, ours: np.ndarray, peer: np.ndarray) -> dict[str, Any]:
 
 def readings(ours: Curves, peer: Curves, at: Sequence[int]) -> list[dict[str, Any]]:
     """The return at each of `at` (an evaluation both sides have; ValueError naming those there
-    are otherwise), the late return, and the AUC over the evaluations both sides have."""
+    are otherwise), then the late return and the AUC over the evaluations both sides have, so
+    that a shorter run is read against the same stretch of the longer one."""
     rows = [
         reading(
             f"return at {step:,}",
@@ -115,15 +117,15 @@ def readings(ours: Curves, peer: Curves, at: Sequence[int]) -> list[dict[str, An
         )
         for step in at
     ]
-    rows.append(
-        reading("late return", stats.late_return(ours.returns), stats.late_return(peer.returns))
-    )
     common = np.intersect1d(ours.steps, peer.steps)
     if common.size == 0:
         raise ValueError(f"{ours.name} and {peer.name} have no evaluation at the same env steps")
-    ours_auc = ours.returns[:, np.isin(ours.steps, common)].mean(axis=1)
-    peer_auc = peer.returns[:, np.isin(peer.steps, common)].mean(axis=1)
-    rows.append(reading(f"AUC over {common.size} common evaluations", ours_auc, peer_auc))
+    ours_common = ours.returns[:, np.isin(ours.steps, common)]
+    peer_common = peer.returns[:, np.isin(peer.steps, common)]
+    late = f"late return (of {common.size} common evaluations)"
+    rows.append(reading(late, stats.late_return(ours_common), stats.late_return(peer_common)))
+    auc = f"AUC over {common.size} common evaluations"
+    rows.append(reading(auc, ours_common.mean(axis=1), peer_common.mean(axis=1)))
     return rows
 
 
