@@ -125,7 +125,8 @@ def readings(ours: Curves, peer: Curves, at: Sequence[int]) -> list[dict[str, An
     late = f"late return (of {common.size} common evaluations)"
     rows.append(reading(late, stats.late_return(ours_common), stats.late_return(peer_common)))
     auc = f"AUC over {common.size} common evaluations"
-    rows.append(reading(auc, ours_common.mean(axis=1), peer_common.mean(axis=1)))
+    auc_ours = stats.area_under_curve(ours_common, common)
+    rows.append(reading(auc, auc_ours, stats.area_under_curve(peer_common, common)))
     return rows
 
 
