@@ -107,8 +107,9 @@ def reading(name: str, ours: np.ndarray, peer: np.ndarray) -> dict[str, Any]:
 
 def readings(ours: Curves, peer: Curves, at: Sequence[int]) -> list[dict[str, Any]]:
     """The return at each of `at` (an evaluation both sides have; ValueError naming those there
-    are otherwise), then the late return and the AUC over the evaluations both sides have, so
-    that a shorter run is read against the same stretch of the longer one."""
+    are otherwise), then the late return (where they have 20 or more; `stats.late_window`) and the
+    AUC over the evaluations both sides have, so that a shorter run is read against the same
+    stretch of the longer one."""
     rows = [
         reading(
             f"return at {step:,}",
@@ -122,8 +123,9 @@ def readings(ours: Curves, peer: Curves, at: Sequence[int]) -> list[dict[str, An
         raise ValueError(f"{ours.name} and {peer.name} have no evaluation at the same env steps")
     ours_common = ours.returns[:, np.isin(ours.steps, common)]
     peer_common = peer.returns[:, np.isin(peer.steps, common)]
-    late = f"late return (of {common.size} common evaluations)"
-    rows.append(reading(late, stats.late_return(ours_common), stats.late_return(peer_common)))
+    if stats.late_window(common.size):  # none under 20 evaluations, as in `compare`
+        late = f"late return (of {common.size} common evaluations)"
+        rows.append(reading(late, stats.late_return(ours_common), stats.late_return(peer_common)))
     auc = f"AUC over {common.size} common evaluations"
     auc_ours = stats.area_under_curve(ours_common, common)
     rows.append(reading(auc, auc_ours, stats.area_under_curve(peer_common, common)))
