@@ -407,8 +407,8 @@ def _tasks_sac_config() -> Config:
 def preset_sac_300k() -> Sweep:
     """Plain SAC on a task at 300k env steps, 5 seeds (`--env_name hopper`, `walker2d`, `ant`):
     the parity run against published SAC and sbx. `train_expert --preset sac_300k --env_name T`
-    trains the same runs and ships the best seed's actor as T's expert. The flags that make it
-    learn each task are in docs/running.md."""
+    trains the same runs and ships the best seed's actor as T's expert. Which flags made it learn
+    each task by 300k: docs/running.md."""
     return Sweep(cfg=_tasks_sac_config(), seeds=tuple(range(5)))
 
 
