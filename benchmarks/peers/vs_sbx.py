@@ -126,9 +126,8 @@ def readings(ours: Curves, peer: Curves, at: Sequence[int]) -> list[dict[str, An
     if stats.late_window(common.size):  # none under 20 evaluations, as in `compare`
         late = f"late return (of {common.size} common evaluations)"
         rows.append(reading(late, stats.late_return(ours_common), stats.late_return(peer_common)))
-    auc = f"AUC over {common.size} common evaluations"
-    auc_ours = stats.area_under_curve(ours_common, common)
-    rows.append(reading(auc, auc_ours, stats.area_under_curve(peer_common, common)))
+    ours_auc, peer_auc = (stats.area_under_curve(r, common) for r in (ours_common, peer_common))
+    rows.append(reading(f"AUC over {common.size} common evaluations", ours_auc, peer_auc))
     return rows
 
 
