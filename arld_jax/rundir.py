@@ -324,6 +324,8 @@ def pool_runs(run_dirs: Sequence[str | Path | RunDir]) -> RunDir:
     """Run directories of one experiment run with different seeds (seeds 0-4, later 5-9 with the
     same command and another --out), read as one: their runs side by side, in the order given,
     over the evaluations all of them have (`pool_metrics`); one directory is returned as loaded.
+    The config is the first directory's with every seed, and each directory's command in
+    `pooled_commands` in place of one `command`.
 
     Raises ValueError naming the directories and the difference when their configs differ in a
     field other than `POOL_MAY_DIFFER`, when their sweeps or experts differ, or when a cell has the
@@ -357,9 +359,10 @@ def pool_runs(run_dirs: Sequence[str | Path | RunDir]) -> RunDir:
     periods = min(run.periods for run in runs)
     entries = [dict(e, run=i) for i, e in enumerate(e for r in runs for e in r.runs)]
     seeds = [s for r in runs for s in r.config.get("seeds", [])]
+    commands = [r.config.get("command") for r in runs]  # the pool has no one command of its own
     return RunDir(
         path=first.path,
-        config=dict(first.config, seeds=seeds),
+        config=dict(first.config, seeds=seeds, command=None, pooled_commands=commands),
         runs=entries,
         metrics=pool_metrics(runs, periods),
         timing={},

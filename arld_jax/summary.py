@@ -255,7 +255,7 @@ def summarize(run_dir: str | Path | RunDir) -> list[dict[str, Any]]:
 
 
 def format_mean_ci(mean: float, ci: float) -> str:
-    """Format as "mean ± ci", rounded to two significant digits of the CI.
+    """Format as "mean ± ci" (thousands separated), rounded to two significant digits of the CI.
 
     Never more precise than 4 decimals nor coarser than whole numbers; "± n/a" when the CI is
     unknown (one seed).
@@ -270,8 +270,8 @@ def format_mean_ci(mean: float, ci: float) -> str:
             decimals = 0
         else:
             decimals = min(4, max(0, 2 - math.floor(math.log10(magnitude))))
-    ci_text = f"{ci:.{decimals}f}" if math.isfinite(ci) else "n/a"
-    return f"{mean:.{decimals}f} ± {ci_text}"
+    ci_text = f"{ci:,.{decimals}f}" if math.isfinite(ci) else "n/a"
+    return f"{mean:,.{decimals}f} ± {ci_text}"
 
 
 def format_iqm(row: dict[str, Any]) -> str:
@@ -404,6 +404,9 @@ def _markdown(run: RunDir, rows: list[dict[str, Any]]) -> str:
     ]
     if config.get("command"):
         lines += [f"Command: `{config['command']}`", ""]
+    if config.get("pooled_commands"):
+        made = "; ".join(f"`{c}`" for c in config["pooled_commands"] if c) or "not recorded"
+        lines += [f"Pooled from runs made by: {made}", ""]
 
     fields = swept_fields(run)
     columns = [

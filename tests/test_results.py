@@ -324,7 +324,7 @@ def test_late_return_per_cell_and_seeds_above_the_expert_by_it(tmp_path: Path) -
     md = md_path.read_text()
     assert "last 2 evaluations (from 19,000 env steps" in md
     assert "| late return |" in md
-    assert "| 1960 ± 25 |" in md and "| 3 of 3 (late: 2) |" in md
+    assert "| 1,960 ± 25 |" in md and "| 3 of 3 (late: 2) |" in md
     short = write_run_dir(tmp_path / "s", NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]})
     rows = summary.summarize(short)
     assert all(
@@ -686,6 +686,30 @@ def test_pooled_directories_compare_as_one_with_every_seed(tmp_path: Path) -> No
     assert final["pair"] == "s0-2+s3-5:strategy=bernoulli − other:strategy=bernoulli"
     alone = rundir.pool_runs([first])  # one directory: as loaded
     assert (alone.path, alone.sources, alone.periods, len(alone.runs)) == (first, (), 4, 6)
+
+
+def test_a_pooled_summary_names_each_directory_command_and_separates_thousands(
+    tmp_path: Path,
+) -> None:
+    """A pool has no one command: its summary names the command of every directory pooled, not
+    the first one's as if it had made them all. Means and intervals carry thousands separators,
+    as the IQM beside them does."""
+    cells, sweep = NONE_AND_BERNOULLI, {"strategy": ["none", "bernoulli"]}
+    first = write_run_dir(tmp_path / "s0-2", cells, sweep)
+    second = write_run_dir(tmp_path / "s3-4", cells, sweep, seeds=(3, 4))
+    config = json.loads((second / "config.json").read_text())
+    config["command"] = "python -m arld_jax.run --synthetic --seeds 3,4"
+    (second / "config.json").write_text(json.dumps(config))
+    md = summary.summary_markdown(rundir.pool_runs([first, second]))
+    assert "Command: `" not in md
+    assert (
+        "Pooled from runs made by: `python -m arld_jax.run --synthetic`; "
+        "`python -m arld_jax.run --synthetic --seeds 3,4`"
+    ) in md
+    assert "Command: `python -m arld_jax.run --synthetic`" in summary.summary_markdown(first)
+    assert summary.format_mean_ci(2719.2, 828.4) == "2,719 ± 828"
+    assert summary.format_mean_ci(12345.6, 1234.4) == "12,346 ± 1,234"
+    assert summary.format_mean_ci(0.1234, 0.05) == "0.123 ± 0.050"
 
 
 def test_pooling_refuses_shared_seeds_and_other_configs(tmp_path: Path) -> None:
